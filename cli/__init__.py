@@ -1,0 +1,1 @@
+"""The ``rimcl`` command line: thin click wrappers around the library."""

@@ -1,0 +1,33 @@
+"""rimcl: measurement errors of tracer velocimetry through inhomogeneous refractive indices.
+
+The public API is imported lazily so that ``import rimcl`` (and ``rimcl --help``)
+works without an OpenCL platform.
+"""
+
+from importlib import import_module
+
+__version__ = "0.1.0"
+
+# public name -> module that defines it
+_EXPORTS = {
+    "RimclError": "rimcl.errors",
+    "select_device": "rimcl.device",
+    "list_devices": "rimcl.device",
+    "Field": "rimcl.field",
+    "AnalyticField": "rimcl.field",
+    "analytic_field": "rimcl.field",
+    "trace_rays": "rimcl.trace",
+    "TraceResult": "rimcl.trace",
+    "STATUS_NAMES": "rimcl.trace",
+    "load_field": "rimcl.flow.fieldfile",
+    "write_field": "rimcl.flow.fieldfile",
+}
+
+__all__ = ["__version__", *sorted(_EXPORTS)]
+
+
+def __getattr__(name):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'rimcl' has no attribute {name!r}")
+    return getattr(import_module(module), name)

@@ -1,0 +1,53 @@
+"""Shared fixtures: one ``device`` per OpenCL device found (PoCL in CI).
+
+Without any OpenCL device the kernel tests are skipped, unless
+``RIMCL_REQUIRE_OPENCL=1`` (set by CI), which makes them fail instead.
+"""
+
+import os
+
+import pytest
+
+from rimcl.errors import RimclError
+
+REQUIRE_OPENCL = os.environ.get("RIMCL_REQUIRE_OPENCL") == "1"
+
+
+def _devices():
+    try:
+        from rimcl.device import _all_devices
+
+        found = _all_devices()
+    except (RimclError, ImportError) as exc:
+        return [], str(exc)
+    wanted = os.environ.get("RIMCL_TEST_DEVICE")
+    devices = [d for _, _, d in found]
+    if wanted:
+        from rimcl.device import select_device
+
+        devices = [select_device(wanted)]
+    return devices, ""
+
+
+_DEVICES, _WHY_NONE = _devices()
+
+
+def _device_id(device):
+    return device.name.strip().split()[0].lower() if device is not None else "none"
+
+
+@pytest.fixture(scope="session", params=_DEVICES or [None], ids=_device_id)
+def device(request):
+    """Every OpenCL device in turn (``RIMCL_TEST_DEVICE`` picks one)."""
+    if request.param is None:
+        if REQUIRE_OPENCL:
+            pytest.fail(f"RIMCL_REQUIRE_OPENCL=1 but no OpenCL device: {_WHY_NONE}")
+        pytest.skip(f"no OpenCL device: {_WHY_NONE}")
+    return request.param
+
+
+@pytest.fixture(scope="session")
+def has_fp64(device):
+    from rimcl.device import has_fp64
+
+    return has_fp64(device)
