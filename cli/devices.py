@@ -3,7 +3,6 @@
 import json
 
 import click
-
 from rimcl.cli.options import handle_errors
 
 
@@ -12,17 +11,16 @@ from rimcl.cli.options import handle_errors
 @handle_errors
 def devices(as_json):
     """List OpenCL platforms and devices with their P:D index (for --device)."""
-    from rimcl.device import list_devices, select_device
+    from rimcl.device import list_devices
 
     found = list_devices()
-    default = select_device()
     if as_json:
         click.echo(json.dumps(found, indent=2))
         return
-    header = ("index", "platform", "device", "OpenCL", "CUs", "memory", "fp64", "images")
+    header = ("index", "platform", "device", "OpenCL", "CUs", "memory", "fp64", "images", "usable")
     rows = [header]
     for entry in found:
-        mark = "*" if entry["device"] == default.name.strip() else " "
+        mark = "*" if entry["default"] else " "
         rows.append(
             (
                 mark + entry["index"],
@@ -33,6 +31,7 @@ def devices(as_json):
                 f"{entry['global_memory_mib']} MiB",
                 "yes" if entry["fp64"] else "no",
                 "yes" if entry["images"] else "no",
+                "yes" if entry["usable"] else f"no: {entry['problem']}",
             )
         )
     widths = [max(len(row[i]) for row in rows) for i in range(len(header))]

@@ -14,8 +14,8 @@ import os
 from rimcl.errors import RimclError
 
 NO_PLATFORM_HELP = (
-    "no OpenCL platform found; install the CPU driver with: pip install \"rimcl[pocl]\" "
-    "(or pip install \"pyopencl[pocl]\")"
+    'no OpenCL platform found; install the CPU driver with: pip install "rimcl[pocl]" '
+    '(or pip install "pyopencl[pocl]")'
 )
 
 
@@ -43,6 +43,27 @@ def _all_devices():
     if not found:
         raise RimclError(NO_PLATFORM_HELP)
     return found
+
+
+_PROBE_SOURCE = "__kernel void probe(__global float *a) { a[0] = sqrt(a[1]); }"
+
+
+@functools.cache
+def build_problem(device):
+    """Why ``device`` cannot compile OpenCL C, or ``""`` if it can.
+
+    Some drivers list devices they cannot compile for: the PoCL 3.0 of the pip wheel
+    (LLVM 14) fails with "unknown target CPU 'generic'" on CPUs newer than its LLVM
+    (AMD Zen 5, for one). Such devices are skipped by :func:`select_device`.
+    """
+    import pyopencl as cl
+
+    try:
+        cl.Program(cl.Context([device]), _PROBE_SOURCE).build()
+    except cl.Error as exc:
+        lines = [line.strip() for line in str(exc).splitlines() if "error" in line.lower()]
+        return (lines[-1] if lines else str(exc).splitlines()[0])[:200]
+    return ""
 
 
 def has_fp64(device):
@@ -74,6 +95,8 @@ def describe_device(device):
         "global_memory_mib": int(device.global_mem_size // 2**20),
         "fp64": has_fp64(device),
         "images": bool(device.image_support),
+        "usable": not build_problem(device),
+        "problem": build_problem(device),
     }
 
 
@@ -83,11 +106,31 @@ def list_devices():
     Returns
     -------
     list of dict
-        :func:`describe_device` entries with an added ``"index"`` key.
+        :func:`describe_device` entries with added ``"index"`` (``P:D``) and
+        ``"default"`` (the device :func:`select_device` picks without a spec) keys.
     """
+    found = _all_devices()
+    try:
+        default = select_device()
+    except RimclError:
+        default = None
     return [
-        {"index": f"{p}:{d}", **describe_device(device)} for p, d, device in _all_devices()
+        {"index": f"{p}:{d}", "default": device == default, **describe_device(device)}
+        for p, d, device in found
     ]
+
+
+def _usable(found):
+    usable = [entry for entry in found if not build_problem(entry[2])]
+    if not usable:
+        problems = "; ".join(
+            f"{device.name.strip()}: {build_problem(device)}" for _, _, device in found
+        )
+        raise RimclError(
+            f"no OpenCL device can compile kernels ({problems}); the pip PoCL is too old for "
+            "this CPU: install the system one (Debian/Ubuntu: apt-get install pocl-opencl-icd)"
+        )
+    return usable
 
 
 def _match(spec, found):
@@ -102,7 +145,10 @@ def _match(spec, found):
         raise RimclError(f"no OpenCL device {spec!r}; see 'rimcl devices' for the list")
     needle = spec.lower()
     for _, _, device in found:
-        if needle in device.platform.name.lower() or needle in device.name.lower():
+        # PoCL's platform is named "Portable Computing Language"; its vendor and
+        # version strings carry "pocl"
+        names = (device.platform.name, device.platform.vendor, device.name, device.version)
+        if any(needle in name.lower() for name in names):
             return device
     raise RimclError(f"no OpenCL device matches {spec!r}; see 'rimcl devices' for the list")
 
@@ -127,7 +173,12 @@ def select_device(spec=None):
     if spec is None:
         spec = os.environ.get("RIMCL_DEVICE") or None
     if spec is not None:
-        return _match(str(spec), found)
+        device = _match(str(spec), found)
+        if build_problem(device):
+            # the spec may match several platforms (two PoCL installs): take a usable one
+            device = _match(str(spec), _usable(found))
+        return device
+    found = _usable(found)
     for wanted in (cl.device_type.GPU, cl.device_type.CPU):
         for _, _, device in found:
             if device.type & wanted:
@@ -135,7 +186,7 @@ def select_device(spec=None):
     return found[0][2]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _context_and_queue(device):
     import pyopencl as cl
 

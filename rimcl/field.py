@@ -115,9 +115,7 @@ class Field:
         else:
             grad = np.asarray(gradient)
             if grad.shape != (*values.shape, 3):
-                raise RimclError(
-                    f"gradient must have shape {(*values.shape, 3)}, got {grad.shape}"
-                )
+                raise RimclError(f"gradient must have shape {(*values.shape, 3)}, got {grad.shape}")
             if not np.all(np.isfinite(grad)):
                 raise RimclError("gradient holds NaN or infinite values")
         if np.min(values) + n_ref <= 0:
