@@ -49,7 +49,9 @@ def parse_step(value):
     try:
         step = float(value)
     except ValueError:
-        raise click.BadParameter(f"{value!r} is not a number or 'auto'", param_hint="--step")
+        raise click.BadParameter(
+            f"{value!r} is not a number or 'auto'", param_hint="--step"
+        ) from None
     if not step > 0:
         raise click.BadParameter("the step must be positive", param_hint="--step")
     return step

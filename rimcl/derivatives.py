@@ -66,11 +66,11 @@ def central_difference(values, spacing, axis, order=4, periodic=False):
         )
     result = np.zeros_like(data)
     if periodic:
-        for off, w in zip(offsets, weights):
+        for off, w in zip(offsets, weights, strict=True):
             result += w * np.roll(data, -off, axis=0)
         return np.moveaxis(result / spacing, 0, axis)
     inner = slice(width, count - width)
-    for off, w in zip(offsets, weights):
+    for off, w in zip(offsets, weights, strict=True):
         result[inner] += w * data[width + off : count - width + off]
     stencil_size = 2 * width + 1
     for i in list(range(width)) + list(range(count - width, count)):
