@@ -1,0 +1,593 @@
+"""The rimcl field file: an HDF5 file of flow frames on a uniform grid.
+
+Layout (``rimcl_schema = "field"``, ``schema_version = 1``), readable with plain h5py::
+
+    /                      attrs: rimcl_schema, schema_version, title, source, units, axes,
+                                  config, versions (JSON) and any extra provenance
+    /grid                  attrs: origin (3,), spacing (3,) along x1, x2, x3 (length units),
+                                  boundary ("clamp" or "periodic"; missing means "clamp")
+    /frames/0000           attrs: time (time units)
+        density            (n3, n2, n1) float32, dimensionless density
+        or delta_n         (n3, n2, n1) float32, n - n_ref, with attribute n_ref (float64)
+        density_gradient   (n3, n2, n1, 3) float32, optional, components along x1, x2, x3
+        velocity           (n3, n2, n1, 3) float32, optional, components along x1, x2, x3
+    /frames/0001 ...
+
+Frames are numbered from 0 in time order. A file holds either ``density`` (turned into a
+refractive index with a Gladstone–Dale product ``G``: ``δn = G (ρ - mean ρ)``,
+``n_ref = 1 + G mean ρ``) or ``delta_n`` directly, in every frame.
+"""
+
+import json
+import math
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from rimcl.errors import RimclError
+from rimcl.field import BOUNDARIES, Field
+from rimcl.flow.cases import resolve_k_rho
+from rimcl.provenance import atomic_path, stamp_h5
+
+SCHEMA = "field"
+SCHEMA_VERSION = 1
+
+# relative slack on times at the ends of the stored range (rounding of t0 + k dt)
+_TIME_SLACK = 1e-9
+
+
+def _frame_name(index):
+    return f"{index:04d}"
+
+
+def _as_frames(values, name, count=None, trailing=()):
+    """A list of float arrays, one per frame, checked for shape and finiteness."""
+    if values is None:
+        return None
+    frames = [np.asarray(v) for v in values]
+    if count is not None and len(frames) != count:
+        raise RimclError(f"{name} has {len(frames)} frames, expected {count}")
+    for k, frame in enumerate(frames):
+        if frame.ndim != 3 + len(trailing) or frame.shape[3:] != trailing:
+            want = "(n3, n2, n1" + "".join(f", {t}" for t in trailing) + ")"
+            raise RimclError(f"{name} frame {k} must have shape {want}, got {frame.shape}")
+        if not np.all(np.isfinite(frame)):
+            raise RimclError(f"{name} frame {k} holds NaN or infinite values")
+    return frames
+
+
+def _chunks(shape):
+    """Chunks of whole (n2, n1) planes, about 1 MiB each, so that gzip sees long runs."""
+    plane = int(np.prod(shape[1:])) * 4
+    depth = max(1, min(shape[0], (1 << 20) // max(plane, 1)))
+    return (depth, *shape[1:])
+
+
+def _attr_value(value):
+    """An HDF5-storable form of a provenance value (dicts and None become JSON text)."""
+    if value is None or (isinstance(value, (dict, list, tuple)) and not _numeric_list(value)):
+        return json.dumps(value)
+    return value
+
+
+def _numeric_list(value):
+    return isinstance(value, (list, tuple)) and all(
+        isinstance(v, (int, float, np.number)) for v in value
+    )
+
+
+def write_field(
+    path,
+    *,
+    density=None,
+    delta_n=None,
+    n_ref=None,
+    times,
+    origin,
+    spacing,
+    velocity=None,
+    density_gradient=None,
+    boundary="clamp",
+    attrs=None,
+    config=None,
+    overwrite=False,
+):
+    """Write frames of a flow to a rimcl field file (atomically, stamped with provenance).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output ``.h5`` file.
+    density : sequence of ndarray, each (n3, n2, n1), optional
+        Dimensionless density per frame. Exactly one of ``density`` and ``delta_n``.
+    delta_n : sequence of ndarray, each (n3, n2, n1), optional
+        ``n - n_ref`` per frame, with ``n_ref``.
+    n_ref : float or sequence of float, optional
+        Reference refractive index (one for all frames, or one per frame); only with
+        ``delta_n``.
+    times : sequence of float
+        Time of each frame (time units), strictly increasing.
+    origin, spacing : sequence of 3 float
+        Position of node ``(0, 0, 0)`` and the grid spacing along ``x1, x2, x3``.
+    velocity : sequence of ndarray, each (n3, n2, n1, 3), optional
+        Flow velocity, components along ``x1, x2, x3``.
+    density_gradient : sequence of ndarray, each (n3, n2, n1, 3), optional
+        ``∇ρ`` (1/length) along ``x1, x2, x3``; only with ``density``. When absent,
+        readers compute it.
+    boundary : {"clamp", "periodic"}
+        ``periodic``: the grid holds one full period of a periodic box (endpoint excluded).
+    attrs : dict, optional
+        Extra root attributes (title, source, units, axes, ...). Dicts and None are stored
+        as JSON text.
+    config : dict, optional
+        The configuration that produced the data, recorded with the software versions
+        (default: ``attrs``).
+    overwrite : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+    """
+    if (density is None) == (delta_n is None):
+        raise RimclError("give exactly one of density and delta_n")
+    if boundary not in BOUNDARIES:
+        raise RimclError(f"boundary must be one of {BOUNDARIES}, got {boundary!r}")
+    times = np.asarray(times, dtype=np.float64).reshape(-1)
+    if times.size == 0:
+        raise RimclError("a field file needs at least one frame")
+    if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+        raise RimclError(f"times must be finite and strictly increasing, got {times.tolist()}")
+    count = times.size
+    kind = "density" if density is not None else "delta_n"
+    scalars = _as_frames(density if density is not None else delta_n, kind, count)
+    shape = scalars[0].shape
+    if any(s.shape != shape for s in scalars):
+        raise RimclError(f"all {kind} frames must have the same shape")
+    if kind == "delta_n":
+        if n_ref is None:
+            raise RimclError("delta_n needs n_ref")
+        refs = np.broadcast_to(np.asarray(n_ref, dtype=np.float64), (count,))
+        if not np.all(np.isfinite(refs)) or np.any(refs <= 0):
+            raise RimclError(f"n_ref must be positive, got {refs.tolist()}")
+    elif n_ref is not None:
+        raise RimclError("n_ref only goes with delta_n (density files get it from K*rho)")
+    if density_gradient is not None and kind != "density":
+        raise RimclError("density_gradient only goes with density")
+    vectors = {
+        "velocity": _as_frames(velocity, "velocity", count, (3,)),
+        "density_gradient": _as_frames(density_gradient, "density_gradient", count, (3,)),
+    }
+    for name, frames in vectors.items():
+        if frames is not None and any(f.shape[:3] != shape for f in frames):
+            raise RimclError(f"{name} frames must have shape {(*shape, 3)}")
+    origin = np.asarray(origin, dtype=np.float64).reshape(-1)
+    spacing = np.asarray(spacing, dtype=np.float64).reshape(-1)
+    if origin.size != 3 or not np.all(np.isfinite(origin)):
+        raise RimclError(f"origin must be 3 finite numbers, got {origin.tolist()}")
+    if spacing.size != 3 or not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
+        raise RimclError(f"spacing must be 3 positive numbers, got {spacing.tolist()}")
+    attrs = dict(attrs or {})
+    written = Path(path)
+    with atomic_path(written, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
+        h5.attrs["rimcl_schema"] = SCHEMA
+        h5.attrs["schema_version"] = SCHEMA_VERSION
+        for key, value in attrs.items():
+            h5.attrs[key] = _attr_value(value)
+        stamp_h5(h5, config if config is not None else attrs)
+        grid = h5.create_group("grid")
+        grid.attrs["origin"] = origin
+        grid.attrs["spacing"] = spacing
+        grid.attrs["boundary"] = boundary
+        frames_group = h5.create_group("frames")
+        for k in range(count):
+            group = frames_group.create_group(_frame_name(k))
+            group.attrs["time"] = times[k]
+            dataset = _write_array(group, kind, scalars[k])
+            if kind == "delta_n":
+                dataset.attrs["n_ref"] = float(refs[k])
+            for name, frames in vectors.items():
+                if frames is not None:
+                    _write_array(group, name, frames[k])
+    return written
+
+
+def _write_array(group, name, values):
+    values = np.ascontiguousarray(values, dtype=np.float32)
+    return group.create_dataset(
+        name,
+        data=values,
+        chunks=_chunks(values.shape),
+        compression="gzip",
+        compression_opts=4,
+        shuffle=True,
+    )
+
+
+def _plain_attr(value):
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace")
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+class FieldFile:
+    """Read access to a rimcl field file; a context manager.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Attributes
+    ----------
+    path : pathlib.Path
+    times : ndarray, float64, shape (n_frames,)
+        Frame times (time units), increasing.
+    origin, spacing : ndarray, float64, shape (3,)
+        Grid along ``x1, x2, x3`` (length units).
+    shape : tuple of int
+        ``(n3, n2, n1)``.
+    boundary : {"clamp", "periodic"}
+    kind : {"density", "delta_n"}
+        What the frames hold.
+    attrs : dict
+        Root attributes (title, source, provenance...).
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise RimclError(f"field file {self.path} does not exist")
+        try:
+            self._h5 = h5py.File(self.path, "r")
+        except OSError as exc:
+            raise RimclError(f"{self.path} is not a readable HDF5 file ({exc})") from None
+        try:
+            self._read_layout()
+        except Exception:
+            self._h5.close()
+            raise
+        self._plane_cache = {}
+
+    def _read_layout(self):
+        h5 = self._h5
+        schema = _plain_attr(h5.attrs.get("rimcl_schema"))
+        if schema != SCHEMA:
+            raise RimclError(
+                f"{self.path} is not a rimcl field file (rimcl_schema = {schema!r}); "
+                "import flow data with 'rimcl field import'"
+            )
+        version = int(h5.attrs.get("schema_version", -1))
+        if version != SCHEMA_VERSION:
+            raise RimclError(f"{self.path}: field schema version {version} is not supported")
+        if "grid" not in h5 or "frames" not in h5:
+            raise RimclError(f"{self.path}: a field file needs the groups 'grid' and 'frames'")
+        grid = h5["grid"]
+        try:
+            self.origin = np.asarray(grid.attrs["origin"], dtype=np.float64).reshape(3)
+            self.spacing = np.asarray(grid.attrs["spacing"], dtype=np.float64).reshape(3)
+        except (KeyError, ValueError):
+            raise RimclError(
+                f"{self.path}: grid needs attributes origin and spacing (3 numbers each)"
+            ) from None
+        if not np.all(np.isfinite(self.origin)) or not np.all(self.spacing > 0):
+            raise RimclError(f"{self.path}: grid origin must be finite and spacing positive")
+        self.boundary = _plain_attr(grid.attrs.get("boundary", "clamp"))
+        if self.boundary not in BOUNDARIES:
+            raise RimclError(f"{self.path}: unknown boundary {self.boundary!r}")
+        names = sorted(h5["frames"])
+        if not names:
+            raise RimclError(f"{self.path} holds no frames")
+        self._frames = [h5["frames"][name] for name in names]
+        first = self._frames[0]
+        self.kind = "density" if "density" in first else "delta_n"
+        if self.kind not in first:
+            raise RimclError(f"{self.path}: frame {names[0]} has neither density nor delta_n")
+        self.shape = tuple(first[self.kind].shape)
+        if len(self.shape) != 3:
+            raise RimclError(f"{self.path}: {self.kind} must be (n3, n2, n1), got {self.shape}")
+        times = []
+        for name, group in zip(names, self._frames, strict=True):
+            if self.kind not in group or group[self.kind].shape != self.shape:
+                raise RimclError(
+                    f"{self.path}: frame {name} needs {self.kind} of shape {self.shape}"
+                )
+            for vector in ("velocity", "density_gradient"):
+                if vector in group and group[vector].shape != (*self.shape, 3):
+                    raise RimclError(
+                        f"{self.path}: frame {name} {vector} must have shape "
+                        f"{(*self.shape, 3)}, got {group[vector].shape}"
+                    )
+            if "time" not in group.attrs:
+                raise RimclError(f"{self.path}: frame {name} has no time attribute")
+            times.append(float(group.attrs["time"]))
+        self.times = np.array(times)
+        if not np.all(np.isfinite(self.times)) or np.any(np.diff(self.times) <= 0):
+            raise RimclError(f"{self.path}: frame times must increase, got {times}")
+        self.attrs = {key: _plain_attr(value) for key, value in h5.attrs.items()}
+
+    def close(self):
+        """Close the file."""
+        self._h5.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc_info):
+        self.close()
+
+    @property
+    def n_frames(self):
+        return len(self._frames)
+
+    @property
+    def has_velocity(self):
+        """Whether every frame holds a velocity."""
+        return all("velocity" in group for group in self._frames)
+
+    @property
+    def has_density_gradient(self):
+        """Whether every frame holds a stored density gradient."""
+        return all("density_gradient" in group for group in self._frames)
+
+    def _group(self, frame):
+        index = int(frame)
+        if not -self.n_frames <= index < self.n_frames:
+            raise RimclError(
+                f"{self.path} has frames 0..{self.n_frames - 1}; frame {frame} does not exist"
+            )
+        return self._frames[index]
+
+    def _read(self, frame, name, selection=()):
+        group = self._group(frame)
+        if name not in group:
+            raise RimclError(f"{self.path}: frame {group.name} holds no {name}")
+        values = group[name][selection] if selection else group[name][()]
+        if not np.all(np.isfinite(values)):
+            raise RimclError(f"{self.path}: {name} of frame {group.name} holds NaN or inf")
+        return values
+
+    def density(self, frame):
+        """Density of one frame, float32 ``(n3, n2, n1)`` (dimensionless)."""
+        if self.kind != "density":
+            raise RimclError(f"{self.path} stores delta_n, not density")
+        return self._read(frame, "density")
+
+    def delta_n(self, frame):
+        """``(δn, n_ref)`` of a file storing ``delta_n``: float32 ``(n3, n2, n1)``, float."""
+        if self.kind != "delta_n":
+            raise RimclError(f"{self.path} stores density; use field() with a K*rho")
+        values = self._read(frame, "delta_n")
+        return values, float(self._group(frame)["delta_n"].attrs["n_ref"])
+
+    def density_gradient(self, frame):
+        """Stored ``∇ρ`` of one frame, float32 ``(n3, n2, n1, 3)``, or None if absent."""
+        if "density_gradient" not in self._group(frame):
+            return None
+        return self._read(frame, "density_gradient")
+
+    def velocity(self, frame):
+        """Velocity of one frame, float32 ``(n3, n2, n1, 3)``, components along x1, x2, x3."""
+        return self._read(frame, "velocity")
+
+    def time_weights(self, time, method="auto"):
+        """Frames and weights that interpolate the stored frames to ``time``.
+
+        Parameters
+        ----------
+        time : float
+            Within the stored times (no extrapolation).
+        method : {"auto", "linear", "cubic"}
+            ``cubic`` is a 4-point Lagrange interpolation on the frames around ``time``
+            (needs 4 frames); ``auto`` uses it when there are 4 or more frames.
+
+        Returns
+        -------
+        list of (int, float)
+            ``(frame, weight)``; the weights sum to 1. A stored time gives one frame.
+        """
+        if method not in ("auto", "linear", "cubic"):
+            raise RimclError(f"time interpolation must be auto, linear or cubic, not {method!r}")
+        time = float(time)
+        first, last = self.times[0], self.times[-1]
+        slack = _TIME_SLACK * max(last - first, abs(last), 1.0)
+        if not first - slack <= time <= last + slack:
+            raise RimclError(f"time {time:g} is outside the stored frames ({first:g} .. {last:g})")
+        exact = np.flatnonzero(np.abs(self.times - time) <= slack)
+        if exact.size:
+            return [(int(exact[0]), 1.0)]
+        right = int(np.searchsorted(self.times, time))
+        cubic = method == "cubic" or (method == "auto" and self.n_frames >= 4)
+        if cubic and self.n_frames < 4:
+            raise RimclError("cubic time interpolation needs at least 4 frames")
+        if not cubic:
+            t0, t1 = self.times[right - 1], self.times[right]
+            frac = (time - t0) / (t1 - t0)
+            return [(right - 1, 1.0 - frac), (right, frac)]
+        start = min(max(right - 2, 0), self.n_frames - 4)
+        nodes = self.times[start : start + 4]
+        weights = []
+        for i in range(4):
+            others = np.delete(nodes, i)
+            weights.append(float(np.prod((time - others) / (nodes[i] - others))))
+        return list(zip(range(start, start + 4), weights, strict=True))
+
+    def _blend(self, time, read, method):
+        total = None
+        for frame, weight in self.time_weights(time, method):
+            part = weight * read(frame).astype(np.float64)
+            total = part if total is None else total + part
+        return total
+
+    def field(self, frame=0, k_rho=None, *, case=None):
+        """The refractive-index field of one stored frame.
+
+        Parameters
+        ----------
+        frame : int
+        k_rho : float, optional
+            Gladstone–Dale product ``G``; or give ``case`` (``"C0"`` … ``"C4"``).
+            Needed for density files, refused for ``delta_n`` files.
+        case : str, optional
+
+        Returns
+        -------
+        rimcl.Field
+            ``δn = G (ρ - mean ρ)``, ``n_ref = 1 + G mean ρ``, ``∇n = G ∇ρ`` (stored, or
+            computed: spectral for periodic grids, 4th-order differences otherwise).
+        """
+        group = self._group(frame)
+        attrs = {"frame": int(frame) % self.n_frames, "time": float(group.attrs["time"])}
+        if self.kind == "delta_n":
+            self._refuse_case(case, k_rho)
+            values, n_ref = self.delta_n(frame)
+            return self._make_field(values.astype(np.float64), n_ref, None, attrs)
+        density = self.density(frame).astype(np.float64)
+        gradient = self.density_gradient(frame)
+        return self._density_field(density, gradient, case, k_rho, attrs)
+
+    def field_at(self, time, k_rho=None, *, case=None, method="auto"):
+        """The refractive-index field at any ``time`` within the stored frames.
+
+        The density (and its stored gradient, or ``δn`` and ``n_ref``) is interpolated in
+        time between frames (see :meth:`time_weights`); arguments as :meth:`field`.
+
+        Returns
+        -------
+        rimcl.Field
+        """
+        weights = self.time_weights(time, method)
+        if len(weights) == 1:
+            return self.field(weights[0][0], k_rho, case=case)
+        attrs = {"time": float(time), "frames": [f for f, _ in weights]}
+        if self.kind == "delta_n":
+            self._refuse_case(case, k_rho)
+            values = self._blend(time, lambda f: self.delta_n(f)[0], method)
+            n_ref = sum(w * self.delta_n(f)[1] for f, w in weights)
+            return self._make_field(values, n_ref, None, attrs)
+        density = self._blend(time, self.density, method)
+        gradient = None
+        if self.has_density_gradient:
+            gradient = self._blend(time, self.density_gradient, method)
+        return self._density_field(density, gradient, case, k_rho, attrs)
+
+    def velocity_at(self, time, method="auto"):
+        """Velocity at ``time`` (interpolated between frames), float64 ``(n3, n2, n1, 3)``."""
+        return self._blend(time, self.velocity, method)
+
+    def sheet_velocity(self, time, x1, method="auto"):
+        """In-plane velocity ``(u2, u3)`` on the light sheet ``x1 = const``.
+
+        Linear in ``x1`` between the two nearest node planes, interpolated in time between
+        frames. Only the two planes are read from the file (and cached).
+
+        Parameters
+        ----------
+        time : float
+        x1 : float
+            Sheet position (length units); inside the grid unless the field is periodic.
+        method : {"auto", "linear", "cubic"}
+            Time interpolation.
+
+        Returns
+        -------
+        ndarray, float64, shape (n3, n2, 2)
+            ``u2, u3`` at the nodes ``(x3, x2)`` of the sheet.
+        """
+        n1 = self.shape[2]
+        position = (float(x1) - self.origin[0]) / self.spacing[0]
+        if self.boundary == "periodic":
+            position %= n1
+            below = min(math.floor(position), n1 - 1)
+            above = (below + 1) % n1
+        else:
+            tolerance = 1e-9 * max(n1, 1)
+            if not -tolerance <= position <= n1 - 1 + tolerance:
+                hi = self.origin[0] + (n1 - 1) * self.spacing[0]
+                raise RimclError(
+                    f"sheet x1 = {x1:g} is outside the field ({self.origin[0]:g} .. {hi:g})"
+                )
+            position = min(max(position, 0.0), n1 - 1.0)
+            below = min(math.floor(position), max(n1 - 2, 0))
+            above = min(below + 1, n1 - 1)
+        frac = position - below
+
+        def plane(frame):
+            lower, upper = self._sheet_planes(frame, below, above)
+            return (1.0 - frac) * lower + frac * upper
+
+        return self._blend(time, plane, method)
+
+    def _sheet_planes(self, frame, below, above):
+        """The velocity planes ``(u2, u3)`` at x1 nodes ``below`` and ``above``, cached."""
+        frame = int(frame) % self.n_frames
+        stale = [key for key in self._plane_cache if key[1] not in (below, above)]
+        for key in stale:
+            del self._plane_cache[key]
+        planes = []
+        for node in (below, above):
+            if (frame, node) not in self._plane_cache:
+                selection = (slice(None), slice(None), node, slice(1, 3))
+                values = self._read(frame, "velocity", selection)
+                self._plane_cache[frame, node] = values.astype(np.float64)
+            planes.append(self._plane_cache[frame, node])
+        return planes
+
+    @staticmethod
+    def _refuse_case(case, k_rho):
+        if case is not None or k_rho is not None:
+            raise RimclError("this file stores delta_n directly; a case or K*rho does not apply")
+
+    def _density_field(self, density, gradient, case, k_rho, attrs):
+        name, g = resolve_k_rho(case, k_rho)
+        mean = float(np.mean(density))
+        attrs.update(case=name, k_rho=g, density_mean=mean)
+        grad_n = None if gradient is None else g * np.asarray(gradient, dtype=np.float64)
+        return self._make_field(g * (density - mean), 1.0 + g * mean, grad_n, attrs)
+
+    def _make_field(self, delta_n, n_ref, gradient, attrs):
+        attrs = {"source": str(self.path), **attrs}
+        return Field.from_arrays(
+            delta_n,
+            spacing=self.spacing,
+            origin=self.origin,
+            n_ref=n_ref,
+            gradient=gradient,
+            boundary=self.boundary,
+            attrs=attrs,
+        )
+
+
+def load_field(path=None, frame=0, *, k_rho=None, case=None, time=None):
+    """Load one frame (or a time between frames) of a field file as a :class:`rimcl.Field`.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        A rimcl field file; None loads the shipped sample (:func:`rimcl.flow.sample_path`).
+    frame : int
+        Stored frame (ignored when ``time`` is given).
+    k_rho : float, optional
+        Gladstone–Dale product ``G``; or give ``case``. Needed for density files.
+    case : str, optional
+        ``"C0"`` … ``"C4"`` (see :data:`rimcl.flow.cases.CASES`).
+    time : float, optional
+        Interpolate in time between stored frames (linear; cubic with 4+ frames).
+
+    Returns
+    -------
+    rimcl.Field
+    """
+    if path is None:
+        from rimcl.flow import sample_path
+
+        path = sample_path()
+    with FieldFile(path) as ff:
+        if time is not None:
+            return ff.field_at(time, k_rho, case=case)
+        return ff.field(frame, k_rho, case=case)
