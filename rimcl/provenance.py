@@ -61,6 +61,25 @@ def stamp_h5(h5obj, config, device=None):
         h5obj.attrs["device"] = to_json(describe_device(device))
 
 
+def check_output(path, overwrite=True):
+    """Refuse, before any work is done, an output that exists (unless ``overwrite``) or
+    whose directory is missing or not writable.
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise RimclError(f"{path} exists (use --overwrite to replace it)")
+    parent = path.parent
+    if not parent.is_dir():
+        raise RimclError(f"output directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise RimclError(f"output directory {parent} is not writable")
+    return path
+
+
 @contextlib.contextmanager
 def atomic_path(path, overwrite=True):
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
@@ -74,14 +93,8 @@ def atomic_path(path, overwrite=True):
     overwrite : bool
         If False and ``path`` exists, raise :class:`RimclError` before doing any work.
     """
-    path = Path(path)
-    if path.exists() and not overwrite:
-        raise RimclError(f"{path} exists (use --overwrite to replace it)")
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise RimclError(f"output directory {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise RimclError(f"output directory {parent} is not writable")
+    path = check_output(path, overwrite)
+    parent = path.parent
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=parent)
     os.close(fd)
     tmp = Path(tmp)

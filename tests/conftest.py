@@ -15,13 +15,15 @@ REQUIRE_OPENCL = os.environ.get("RIMCL_REQUIRE_OPENCL") == "1"
 
 def _devices():
     try:
-        from rimcl.device import _all_devices
+        from rimcl.device import _all_devices, build_problem
 
         found = _all_devices()
     except (RimclError, ImportError) as exc:
         return [], str(exc)
     wanted = os.environ.get("RIMCL_TEST_DEVICE")
-    devices = [d for _, _, d in found]
+    devices = [d for _, _, d in found if not build_problem(d)]
+    if not devices:
+        return [], "no OpenCL device can compile kernels (see 'rimcl devices')"
     if wanted:
         from rimcl.device import select_device
 

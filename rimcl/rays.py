@@ -1,0 +1,123 @@
+"""Ray sets for ``rimcl trace`` and its HDF5 output.
+
+A ray set is either the paper's fan (random tracers in the light sheet, each with
+``M x M`` rays aimed at an equidistant grid on the exit plane, DESIGN §6.2) or rays read
+from a file. The output file holds one row per ray.
+"""
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from rimcl.camera import PlaneCamera, Scene, seed_tracers
+from rimcl.errors import RimclError
+from rimcl.field import AnalyticField
+from rimcl.provenance import atomic_path, stamp_h5, to_json
+from rimcl.trace import STATUS_NAMES
+
+TRACE_SCHEMA = "trace"
+TRACE_SCHEMA_VERSION = 1
+
+
+def analytic_scene(length):
+    """Scene for a closed-form field: sheet ``x1 = 0``, exit plane ``x1 = L``,
+    field of view ``[-L/2, L/2]²`` (centred on the axis of the GRIN rod and fish-eye)."""
+    half = 0.5 * float(length)
+    return Scene(0.0, float(length), np.array([-half, -half]), np.array([half, half]), False)
+
+
+def scene_for(field, length=None):
+    """Default scene of a gridded or closed-form field."""
+    if isinstance(field, AnalyticField):
+        return analytic_scene(np.pi if length is None else length)
+    return Scene.from_grid(field.origin, field.spacing, field.shape, field.boundary, depth=length)
+
+
+def fan_rays(scene, tracers, fan, seed):
+    """The paper's ray fan: ``tracers`` random tracers, ``fan x fan`` rays each.
+
+    Returns
+    -------
+    origins, directions : ndarray, shape (tracers * fan², 3)
+    tracer_id : ndarray of int64, shape (tracers * fan²,)
+    """
+    rng = np.random.default_rng(seed)
+    positions = seed_tracers(tracers, scene, rng)
+    camera = PlaneCamera(scene, fan)
+    directions = camera.directions(positions).reshape(-1, 3)
+    per_tracer = camera.rays_per_tracer
+    origins = np.repeat(scene.in_sheet(positions), per_tracer, axis=0)
+    tracer_id = np.repeat(np.arange(len(positions)), per_tracer)
+    return origins, directions, tracer_id
+
+
+def read_rays(path):
+    """Rays from a file: ``.npz`` or HDF5 with arrays ``origins`` and ``directions``
+    (``(N, 3)``, ``x1, x2, x3``), or ``.csv`` with columns ``x1,x2,x3,d1,d2,d3``.
+
+    Returns
+    -------
+    origins, directions : ndarray, float64, shape (N, 3)
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise RimclError(f"ray file {path} does not exist")
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".npz":
+            with np.load(path) as data:
+                arrays = {name: data[name] for name in ("origins", "directions") if name in data}
+        elif suffix == ".csv":
+            table = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
+            if table.shape[1] != 6:
+                raise RimclError(f"{path}: a ray CSV needs 6 columns x1,x2,x3,d1,d2,d3")
+            arrays = {"origins": table[:, :3], "directions": table[:, 3:]}
+        else:
+            with h5py.File(path, "r") as data:
+                arrays = {
+                    name: data[name][()] for name in ("origins", "directions") if name in data
+                }
+    except (OSError, ValueError) as exc:
+        raise RimclError(f"cannot read rays from {path}: {exc}") from None
+    missing = {"origins", "directions"} - set(arrays)
+    if missing:
+        raise RimclError(f"{path} lacks {', '.join(sorted(missing))}")
+    return np.asarray(arrays["origins"], float), np.asarray(arrays["directions"], float)
+
+
+def write_trace(path, result, config, device=None, tracer_id=None, overwrite=False):
+    """Write a :class:`rimcl.TraceResult` as an HDF5 file, atomically.
+
+    Layout: root attributes ``rimcl_schema = "trace"``, ``schema_version``,
+    ``status_counts`` (JSON), ``status_names``, ``config``, ``versions``, ``device``;
+    group ``rays`` with one row per ray: ``origin``, ``direction``, ``image_pos``,
+    ``end_pos``, ``end_dir`` (N, 3), ``deflection``, ``path_length``, ``optical_path``
+    (N,), ``deflection_angles``, ``n_metric`` (N, 3), ``steps``, ``status`` (N,) and,
+    for fans, ``tracer_id`` (N,).
+    """
+    columns = {
+        "origin": result.origins,
+        "direction": result.directions,
+        "image_pos": result.image_pos,
+        "end_pos": result.end_pos,
+        "end_dir": result.end_dir,
+        "deflection": result.deflection,
+        "deflection_angles": result.deflection_angles,
+        "path_length": result.path_length,
+        "optical_path": result.optical_path,
+        "n_metric": result.n_metric,
+        "steps": result.steps.astype(np.int32),
+        "status": result.status,
+    }
+    if tracer_id is not None:
+        columns["tracer_id"] = tracer_id
+    with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as out:
+        out.attrs["rimcl_schema"] = TRACE_SCHEMA
+        out.attrs["schema_version"] = TRACE_SCHEMA_VERSION
+        out.attrs["status_names"] = to_json(list(STATUS_NAMES))
+        out.attrs["status_counts"] = to_json(result.counts)
+        stamp_h5(out, {**config, "trace": result.config}, device)
+        rays = out.create_group("rays")
+        for name, values in columns.items():
+            rays.create_dataset(name, data=values, compression="gzip", shuffle=True)
