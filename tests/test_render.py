@@ -39,7 +39,9 @@ def test_exact_renderer_bias_below_a_hundredth_pixel(window):
     for dx in OFFSETS:
         for dy in OFFSETS:
             point = centre + np.array([dx, dy + 0.05])
-            worst = max(worst, np.max(np.abs(_round_trip(_renderer("exact"), point, window) - point)))
+            worst = max(
+                worst, np.max(np.abs(_round_trip(_renderer("exact"), point, window) - point))
+            )
     assert worst <= 0.01
 
 
