@@ -3,6 +3,7 @@
 import json
 
 import click
+
 from rimcl.cli.options import handle_errors
 
 

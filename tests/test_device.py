@@ -1,0 +1,47 @@
+"""Device selection: never interactive, explicit spec, then RIMCL_DEVICE, then GPU, then CPU."""
+
+import pytest
+
+import rimcl
+from rimcl.device import describe_device, list_devices
+from rimcl.errors import RimclError
+
+
+def test_spec_forms_select_the_device(device):
+    entry = next(e for e in list_devices() if e["usable"] and e["device"] == device.name.strip())
+    by_index = rimcl.select_device(entry["index"])
+    assert by_index.name == device.name
+    assert rimcl.select_device(device) is device
+    part = device.name.strip().split("-")[0]
+    assert not rimcl.device.build_problem(rimcl.select_device(part))
+
+
+def test_environment_variable_is_used(device, monkeypatch):
+    entry = next(e for e in list_devices() if e["usable"] and e["device"] == device.name.strip())
+    monkeypatch.setenv("RIMCL_DEVICE", entry["index"])
+    assert rimcl.select_device().name == device.name
+
+
+def test_unknown_spec_is_one_clear_error(device, monkeypatch):
+    monkeypatch.delenv("RIMCL_DEVICE", raising=False)
+    with pytest.raises(RimclError, match="no OpenCL device"):
+        rimcl.select_device("no-such-device-anywhere")
+    with pytest.raises(RimclError, match="no OpenCL device '9:9'"):
+        rimcl.select_device("9:9")
+
+
+def test_device_description_lists_what_users_need(device):
+    info = describe_device(device)
+    for key in (
+        "platform",
+        "device",
+        "opencl_version",
+        "compute_units",
+        "global_memory_mib",
+        "fp64",
+        "images",
+        "usable",
+    ):
+        assert key in info
+    assert info["usable"] is True
+    assert sum(entry["default"] for entry in list_devices()) == 1
