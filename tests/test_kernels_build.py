@@ -1,0 +1,46 @@
+"""Every kernel file builds for every define set it documents."""
+
+import itertools
+
+import pytest
+
+from rimcl.device import context_for
+from rimcl.program import build_program, get_kernel, kernel_files
+
+
+def _product(**choices):
+    names = sorted(choices)
+    for values in itertools.product(*(choices[name] for name in names)):
+        yield dict(zip(names, values, strict=True))
+
+
+# file -> (kernel names, list of define sets)
+DEFINE_SETS = {
+    "trace.cl": (
+        ("trace_rays",),
+        [
+            *_product(RIMCL_PRECISION=(0, 1, 2), RIMCL_FIELD=(1, 2, 3, 4), RIMCL_PERIODIC=(0,)),
+            *_product(RIMCL_PRECISION=(0, 1, 2), RIMCL_FIELD=(0,), RIMCL_PERIODIC=(0, 1)),
+        ],
+    ),
+}
+
+
+def _cases():
+    for filename, (kernels, define_sets) in DEFINE_SETS.items():
+        for defines in define_sets:
+            label = "-".join(f"{k.removeprefix('RIMCL_')}={v}" for k, v in defines.items())
+            yield pytest.param(filename, kernels, defines, id=f"{filename}-{label}")
+
+
+def test_every_kernel_file_is_covered():
+    assert set(kernel_files()) == set(DEFINE_SETS)
+
+
+@pytest.mark.parametrize(("filename", "kernels", "defines"), list(_cases()))
+def test_kernel_builds(device, has_fp64, filename, kernels, defines):
+    if defines.get("RIMCL_PRECISION") == 2 and not has_fp64:
+        pytest.skip("f64 needs cl_khr_fp64")
+    program = build_program(context_for(device), filename, defines)
+    for name in kernels:
+        assert get_kernel(program, name).function_name == name
