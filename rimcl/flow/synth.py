@@ -26,11 +26,13 @@ the same flow better.
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import scipy.fft
 
 from rimcl.errors import RimclError
+from rimcl.flow.fieldfile import write_field
 
 RHO_LIGHT = 1.0
 RHO_HEAVY = 1.105
@@ -437,3 +439,102 @@ def synthesize(
         history=history,
         params=params,
     )
+
+
+def write_synth(result, path, *, overwrite=False):
+    """Write a :class:`SynthResult` as a rimcl field file (periodic box, origin 0).
+
+    Parameters
+    ----------
+    result : SynthResult
+    path : str or Path
+    overwrite : bool
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    params = result.params
+    attrs = {
+        "title": f"rimcl synthetic buoyancy-driven turbulence, {params['grid']}^3",
+        "source": "rimcl field synth (pseudo-spectral Boussinesq solver)",
+        "length_unit": "L0 (the box is 2*pi L0)",
+        "time_unit": "L0/U0",
+        "axes": f"x1, x2, x3; gravity along -{params['gravity_axis']}",
+        **{key: value for key, value in params.items() if value is not None},
+        "history": {key: values.tolist() for key, values in result.history.items()},
+    }
+    return write_field(
+        path,
+        density=result.density,
+        velocity=result.velocity,
+        density_gradient=result.density_gradient,
+        times=result.times,
+        origin=(0.0, 0.0, 0.0),
+        spacing=result.spacing,
+        boundary="periodic",
+        attrs=attrs,
+        config=params,
+        overwrite=overwrite,
+    )
+
+
+def run_synth(path, *, overwrite=False, **options):
+    """Run :func:`synthesize` and write the result to ``path``.
+
+    The output is checked before the run, so an existing file is refused at once.
+
+    Parameters
+    ----------
+    path : str or Path
+    overwrite : bool
+    **options
+        Passed to :func:`synthesize`.
+
+    Returns
+    -------
+    SynthResult
+    """
+    if Path(path).exists() and not overwrite:
+        raise RimclError(f"{path} exists (use --overwrite to replace it)")
+    result = synthesize(**options)
+    write_synth(result, path, overwrite=overwrite)
+    return result
+
+
+def history_table(result, rows=12):
+    """A short text table of the run: time, kinetic energy, density variance.
+
+    Parameters
+    ----------
+    result : SynthResult
+    rows : int
+        About how many steps of the spin-up to show (the frames are always shown).
+
+    Returns
+    -------
+    str
+    """
+    history = result.history
+    times = history["time"]
+    frame_rows = [int(np.argmin(np.abs(times - t))) for t in result.times]
+    spin_up = np.flatnonzero(times < result.times[0])
+    shown = sorted(set(spin_up[:: max(1, math.ceil(spin_up.size / rows))]) | set(frame_rows))
+    lines = [f"{'time':>9}  {'kinetic energy':>14}  {'density variance':>16}  note"]
+    at_peak = result.params["start"] != "time"
+    for i in shown:
+        notes = []
+        if i in frame_rows:
+            notes.append(f"frame {frame_rows.index(i)}")
+        if at_peak and i == frame_rows[0]:
+            notes.append("kinetic-energy peak (to one step)")
+        lines.append(
+            f"{times[i]:9.4f}  {history['kinetic_energy'][i]:14.6e}  "
+            f"{history['density_variance'][i]:16.6e}  {', '.join(notes)}".rstrip()
+        )
+    p = result.params
+    lines.append(
+        f"grid {p['grid']}^3, Re {p['reynolds']:g}, Sc {p['schmidt']:g}, Atwood {p['atwood']:.4f}, "
+        f"{p['steps']} steps, k_max*eta {p['kmax_eta_last_frame']:.2f}"
+    )
+    return "\n".join(lines)

@@ -1,0 +1,1 @@
+"""The shipped sample field (installed as ``rimcl.samples``); see README.md here."""
