@@ -28,10 +28,13 @@ CENTROID_WEIGHTS = ("excess", "grey")
 
 
 class TracerFlag(enum.IntFlag):
-    """Bits of the per-tracer ``flags`` mask (output files keep their names).
+    """Bits of the per-tracer masks (output files keep their names).
 
-    A tracer without a position (``NO_RAYS`` or ``BELOW_THRESHOLD``) has NaN coordinates;
-    the other bits mark positions that may be degraded.
+    A tracer without a position (``NO_RAYS`` or ``BELOW_THRESHOLD``) has NaN coordinates.
+    The bits of :data:`EXCLUDING` make a position unusable or doubtful (statistics leave
+    such tracers out, and count them); the bits of :data:`NOTES` record what happened to
+    the light of an image that is still measured as a camera would (rays lost to the side
+    of the field or to the aperture, a clipped peak).
     """
 
     NO_RAYS = 1  # no ray reached the image (all failed, vignetted or outside the window)
@@ -51,6 +54,8 @@ def flag_names():
 
 
 NO_POSITION = TracerFlag.NO_RAYS | TracerFlag.BELOW_THRESHOLD
+NOTES = TracerFlag.RAYS_FAILED | TracerFlag.RAYS_VIGNETTED | TracerFlag.SATURATED
+EXCLUDING = ~NOTES
 
 
 @dataclasses.dataclass(frozen=True)

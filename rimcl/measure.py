@@ -25,7 +25,16 @@ from pathlib import Path
 import numpy as np
 
 from rimcl.camera import CAMERAS, PlaneCamera, PupilCamera, Scene, seed_tracers
-from rimcl.centroid import CENTROID_WEIGHTS, NO_POSITION, TracerFlag, flag_names, locate, not_found
+from rimcl.centroid import (
+    CENTROID_WEIGHTS,
+    EXCLUDING,
+    NO_POSITION,
+    NOTES,
+    TracerFlag,
+    flag_names,
+    locate,
+    not_found,
+)
 from rimcl.errors import RimclError
 from rimcl.field import Field
 from rimcl.provenance import atomic_path, stamp_h5, to_json
@@ -496,6 +505,8 @@ def run_render(
         raise RimclError(f"the threshold must be in [0, 1023) counts, got {threshold}")
     if int(pixels) < 1:
         raise RimclError(f"the image needs at least 1 pixel, got {pixels}")
+    if step is not None and not (isinstance(step, (int, float)) and step > 0):
+        raise RimclError(f"the step must be a positive number (or None: half a cell), got {step!r}")
     frames = int(frames)
     with ExitStack() as stack:
         source, source_name = _open_source(field, stack)
@@ -732,7 +743,8 @@ def _assemble(
     frames, count = reference.tracks.shape[:2]
     ref, meas = reference.images, measured.images
     truth_flags = np.where(reference.outside, int(TracerFlag.OUTSIDE_FIELD), 0)
-    flags = ref["flags"] | meas["flags"] | truth_flags
+    every = ref["flags"] | meas["flags"] | truth_flags
+    flags, notes = every & int(EXCLUDING), every & int(NOTES)
 
     def rows(values):
         return np.asarray(values).reshape(-1)
@@ -760,6 +772,7 @@ def _assemble(
         "peak_ref": rows(ref["peak"]),
         "peak_meas": rows(meas["peak"]),
         "flags": rows(flags),
+        "notes": rows(notes),
         "flags_ref": rows(ref["flags"]),
         "flags_meas": rows(meas["flags"]),
     }
@@ -777,12 +790,14 @@ def _assemble(
             u = first_difference(positions[kind], dt) if u is None else u
             velocity[f"u2_{kind}"], velocity[f"u3_{kind}"] = u[:, 0], u[:, 1]
         velocity["flags"] = np.bitwise_or.reduce(flags[:2], axis=0)
+        velocity["notes"] = np.bitwise_or.reduce(notes[:2], axis=0)
     if frames >= 3:
         acceleration = {"id": np.arange(count)}
         for kind in ("true", "ref", "meas"):
             a = second_difference(positions[kind], dt)
             acceleration[f"a2_{kind}"], acceleration[f"a3_{kind}"] = a[:, 0], a[:, 1]
         acceleration["flags"] = np.bitwise_or.reduce(flags[:3], axis=0)
+        acceleration["notes"] = np.bitwise_or.reduce(notes[:3], axis=0)
     attrs = {
         "rimcl_schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
@@ -793,6 +808,7 @@ def _assemble(
         "pixel_size": rend.pixel_size,
         "dt": dt,
         "flag_names": json.dumps(flag_names()),
+        "note_bits": int(NOTES),
         "n_tracers": count,
         "n_frames": frames,
         "rays_per_tracer": cam.rays_per_tracer,
@@ -881,7 +897,7 @@ def write_frame_image(path, result, overwrite=False):
     if suffix not in (".png", ".tif", ".tiff"):
         raise RimclError(f"frame image {path} must end in .png, .tif or .tiff")
     note = to_json({"config": result.config, "versions": versions()})
-    image = Image.fromarray(np.ascontiguousarray(result.frame_image[::-1]).astype(np.uint16))
+    image = Image.fromarray(np.ascontiguousarray(result.frame_image[::-1]))
     with atomic_path(path, overwrite=overwrite) as tmp:
         if suffix == ".png":
             info = PngImagePlugin.PngInfo()

@@ -1,0 +1,140 @@
+"""``rimcl render`` through click's test runner: outputs, one-line errors, nothing lost."""
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from rimcl.cli.main import cli
+from rimcl.flow.fieldfile import write_field
+
+QUICK = ["--tracers", "4", "--fan", "4", "--pixels", "1024"]
+
+
+def _periodic_box(path, with_velocity=True):
+    count = 12
+    h = 2 * np.pi / count
+    x = np.arange(count) * h
+    x3, x2, x1 = np.meshgrid(x, x, x, indexing="ij")
+    density = [1 + 0.05 * np.sin(x1 + t) * np.cos(x2) for t in (0.0, 0.1, 0.2)]
+    velocity = [np.stack([0 * x1, np.sin(x3), np.cos(x2)], axis=-1)] * 3
+    write_field(
+        path,
+        density=density,
+        times=(0.0, 0.005, 0.01),
+        origin=(0, 0, 0),
+        spacing=(h, h, h),
+        velocity=velocity if with_velocity else None,
+        boundary="periodic",
+    )
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def box(tmp_path_factory):
+    return _periodic_box(tmp_path_factory.mktemp("cli") / "box.h5")
+
+
+def _run(args):
+    return CliRunner().invoke(cli, ["render", *args])
+
+
+def test_render_writes_the_tables_and_a_frame_image(box, device, tmp_path):
+    out, picture = tmp_path / "air.h5", tmp_path / "air.png"
+    result = _run(
+        ["--field", box, "--case", "C2", *QUICK, "-o", str(out), "--frame-image", str(picture)]
+    )
+    assert result.exit_code == 0, result.output
+    assert "wrote" in result.output and "time per stage" in result.output
+    with h5py.File(out) as h5:
+        assert h5.attrs["rimcl_schema"] == "render" and h5.attrs["case"] == "C2"
+        assert len(h5["tracers/id"]) == 12 and len(h5["acceleration/id"]) == 4
+        assert np.all(np.isfinite(h5["tracers/x2_meas"][()]))
+    assert picture.stat().st_size > 0
+
+
+def test_render_defaults_to_the_shipped_sample(device, tmp_path):
+    out = tmp_path / "sample.h5"
+    result = _run([*QUICK, "--frames", "1", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    with h5py.File(out) as h5:
+        assert h5.attrs["case"] == "C1"
+        assert h5.attrs["length_L"] == pytest.approx(2 * np.pi)
+
+
+def test_existing_output_is_kept_without_overwrite(box, device, tmp_path):
+    out = tmp_path / "kept.h5"
+    out.write_bytes(b"precious")
+    result = _run(["--field", box, *QUICK, "-o", str(out)])
+    assert result.exit_code == 1
+    assert "exists" in result.output and "--overwrite" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert out.read_bytes() == b"precious"
+    again = _run(["--field", box, *QUICK, "--frames", "1", "-o", str(out), "--overwrite"])
+    assert again.exit_code == 0, again.output
+    assert h5py.is_hdf5(out)
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--tracers", "0"], "at least 1"),
+        (
+            [
+                "--camera",
+                "pupil",
+                "--view-angle",
+                "85",
+                "--camera-distance",
+                "100",
+                "--aperture-diameter",
+                "1",
+            ],
+            "no ray",
+        ),
+        (["--camera", "pupil", "--focal-length", "50"], "--f-number"),
+        (["--camera", "pupil", "--camera-distance", "3"], "beyond the exit plane"),
+        (["--k-rho", "1e-3", "--case", "C1"], "not both"),
+    ],
+)
+def test_bad_input_is_one_line_and_writes_nothing(box, device, tmp_path, extra, message):
+    out = tmp_path / "none.h5"
+    args = ["--field", box, *QUICK, "--frames", "1", *extra, "-o", str(out)]
+    result = _run(args)
+    assert result.exit_code != 0
+    assert message in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_field_without_velocity_is_refused_for_tracking(device, tmp_path):
+    still = _periodic_box(tmp_path / "still.h5", with_velocity=False)
+    out = tmp_path / "none.h5"
+    result = _run(["--field", still, *QUICK, "-o", str(out)])
+    assert result.exit_code == 1
+    assert "holds no velocity" in result.output and "--frames 1" in result.output
+    assert not out.exists()
+
+
+def test_missing_output_directory_is_refused_before_any_work(box, tmp_path):
+    out = tmp_path / "no" / "such" / "dir.h5"
+    result = _run(["--field", box, *QUICK, "-o", str(out)])
+    assert result.exit_code == 1
+    assert "does not exist" in result.output
+
+
+def test_help_lists_the_options():
+    result = CliRunner().invoke(cli, ["render", "--help"])
+    assert result.exit_code == 0
+    for option in (
+        "--camera",
+        "--fan",
+        "--pupil-rays",
+        "--renderer",
+        "--psf-sigma",
+        "--threshold",
+        "--frame-image",
+        "--f-number",
+        "--view-angle",
+    ):
+        assert option in result.output

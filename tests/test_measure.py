@@ -1,0 +1,294 @@
+"""The synthetic PTV measurement end to end (``rimcl.measure.run_render``), on small fields."""
+
+import json
+import tracemalloc
+
+import h5py
+import numpy as np
+import pytest
+
+from rimcl.camera import PupilCamera, Scene
+from rimcl.centroid import TracerFlag
+from rimcl.errors import RimclError
+from rimcl.flow.fieldfile import write_field
+from rimcl.measure import run_render, write_frame_image, write_render
+
+TIMES = (0.0, 0.01, 0.02)
+OMEGA = 2.0  # solid-body rotation rate of the linear-medium file (rad per time unit)
+GRADIENT, N0 = 5e-3, 1.33  # linear medium n = N0 + GRADIENT (x2 - 1/2)
+SMALL = {"tracers": 6, "fan": 5, "pupil_rays": 25, "pixels": 1024}
+
+
+def _grid(count, periodic):
+    size = 2 * np.pi if periodic else 1.0
+    h = size / count if periodic else size / (count - 1)
+    x = np.arange(count) * h
+    x3, x2, x1 = np.meshgrid(x, x, x, indexing="ij")
+    return x1, x2, x3, h
+
+
+@pytest.fixture(scope="module")
+def blobs_file(tmp_path_factory):
+    """A periodic 2π box of density blobs moving with a smooth periodic flow."""
+    x1, x2, x3, h = _grid(16, periodic=True)
+    density = [1 + 0.05 * np.sin(x1 + t) * np.cos(x2) * np.sin(x3 + 0.3) for t in (0, 0.1, 0.2)]
+    velocity = [np.stack([np.zeros_like(x1), np.sin(x3), np.cos(x2)], axis=-1)] * 3
+    path = tmp_path_factory.mktemp("fields") / "blobs.h5"
+    write_field(
+        path,
+        density=density,
+        times=TIMES,
+        origin=(0, 0, 0),
+        spacing=(h, h, h),
+        velocity=velocity,
+        boundary="periodic",
+    )
+    return path
+
+
+@pytest.fixture(scope="module")
+def linear_file(tmp_path_factory):
+    """A clamped unit cube of constant ∇n along x2, the sheet rotating as a solid body."""
+    x1, x2, x3, h = _grid(9, periodic=False)
+    delta_n = [GRADIENT * (x2 - 0.5)] * 3
+    velocity = [np.stack([0 * x1, -OMEGA * (x3 - 0.5), OMEGA * (x2 - 0.5)], axis=-1)] * 3
+    path = tmp_path_factory.mktemp("fields") / "linear.h5"
+    write_field(
+        path,
+        delta_n=delta_n,
+        n_ref=N0,
+        times=TIMES,
+        origin=(0, 0, 0),
+        spacing=(h, h, h),
+        velocity=velocity,
+    )
+    return path
+
+
+@pytest.mark.parametrize("camera", ["plane", "pupil"])
+@pytest.mark.parametrize("renderer", ["exact", "paper"])
+def test_zero_k_rho_measures_exactly_the_reference(blobs_file, device, renderer, camera):
+    result = run_render(
+        blobs_file, k_rho=0.0, renderer=renderer, camera=camera, device=device, **SMALL
+    )
+    rows = result.tracers
+    assert np.all(np.isfinite(rows["x2_ref"])) and np.all(rows["flags"] == 0)
+    for name in ("x2", "x3", "area", "perimeter", "circularity"):
+        np.testing.assert_array_equal(rows[f"{name}_meas"], rows[f"{name}_ref"])
+    np.testing.assert_array_equal(result.velocity["u2_meas"], result.velocity["u2_ref"])
+
+
+def test_reference_is_reused_across_cases_and_checked(blobs_file, device):
+    fresh = run_render(blobs_file, case="C3", device=device, **SMALL)
+    reused = run_render(blobs_file, case="C3", device=device, reference=fresh.reference, **SMALL)
+    for name, values in fresh.tracers.items():
+        np.testing.assert_array_equal(reused.tracers[name], values, err_msg=name)
+    zero = run_render(blobs_file, k_rho=0.0, device=device, reference=fresh.reference, **SMALL)
+    np.testing.assert_array_equal(zero.tracers["x2_meas"], zero.tracers["x2_ref"])
+    with pytest.raises(RimclError, match="differs in: tracers"):
+        run_render(
+            blobs_file,
+            case="C3",
+            device=device,
+            reference=fresh.reference,
+            **{**SMALL, "tracers": 7},
+        )
+
+
+def _linear_medium_image_shift(camera, tracers):
+    """Mean float64 shift along x2 of the image points of a tracer's pupil rays.
+
+    In ``t`` (dt = ds/n) the linear medium gives ``y'' = g² y`` for ``y = n(x2)``, so
+    ``y = y0 cosh(g t) + T2 sinh(g t)`` and ``x2' = y0 sinh(g t) + T2 cosh(g t)``, while
+    ``x1 = T1 t``; the exit at ``x1 = L`` is at ``t = L / T1``, and the image point is
+    the straight backward extension of the exit ray to the sheet.
+    """
+    g, depth = GRADIENT, camera.scene.depth
+    directions = camera.directions(tracers)
+    y0 = N0 + g * (tracers[:, :1] - 0.5)
+    t_in, t2_in = y0 * directions[..., 0], y0 * directions[..., 1]
+    t_exit = depth / t_in
+    y_exit = y0 * np.cosh(g * t_exit) + t2_in * np.sinh(g * t_exit)
+    slope_exit = (y0 * np.sinh(g * t_exit) + t2_in * np.cosh(g * t_exit)) / t_in
+    image = (y_exit - N0) / g + 0.5 - depth * slope_exit
+    return (image - tracers[:, :1]).mean(axis=1)
+
+
+def test_linear_medium_shift_matches_float64_rays(linear_file, device):
+    settings = {"tracers": 4, "pupil_rays": 64, "pixels": 2048, "margin": 0.2}
+    result = run_render(
+        linear_file,
+        camera="pupil",
+        camera_distance=20.0,
+        aperture_diameter=0.5,
+        frames=1,
+        device=device,
+        **settings,
+    )
+    rows = result.tracers
+    camera = PupilCamera(
+        Scene.from_grid((0, 0, 0), (0.125,) * 3, (9, 9, 9), "clamp"), 0.5, 20.0, rays=64
+    )
+    tracers = np.stack([rows["x2_true"], rows["x3_true"]], axis=-1)
+    expected = _linear_medium_image_shift(camera, tracers)
+    pixel = result.attrs["pixel_size"]
+    assert np.all(np.abs(expected) > 3 * pixel)  # a shift of several pixels
+    np.testing.assert_allclose(rows["x2_meas"] - rows["x2_ref"], expected, rtol=0.02)
+    # across the gradient nothing moves (each ray keeps its x3 image exactly)
+    np.testing.assert_allclose(rows["x3_meas"], rows["x3_ref"], atol=0.01 * pixel)
+
+
+def test_solid_body_rotation_truth(linear_file, device):
+    result = run_render(linear_file, tracers=40, fan=2, margin=0.2, device=device)
+    rows = result.tracers
+    start = np.stack([rows["x2_true"], rows["x3_true"]], axis=-1)[rows["frame"] == 0]
+    offset = start - 0.5
+    exact = []
+    for frame, t in enumerate(TIMES):
+        c, s = np.cos(OMEGA * t), np.sin(OMEGA * t)
+        exact.append(
+            0.5
+            + np.stack(
+                [c * offset[:, 0] - s * offset[:, 1], s * offset[:, 0] + c * offset[:, 1]], axis=-1
+            )
+        )
+        pick = rows["frame"] == frame
+        found = np.stack([rows["x2_true"][pick], rows["x3_true"][pick]], axis=-1)
+        np.testing.assert_allclose(found, exact[-1], atol=1e-6 * result.attrs["length_L"])
+    np.testing.assert_allclose(result.velocity["u2_true"], -OMEGA * offset[:, 1], atol=1e-9)
+    np.testing.assert_allclose(result.velocity["u3_true"], OMEGA * offset[:, 0], atol=1e-9)
+    # the true acceleration is the second difference of the exact positions
+    chord = (exact[2] - 2 * exact[1] + exact[0]) / TIMES[1] ** 2
+    np.testing.assert_allclose(result.acceleration["a2_true"], chord[:, 0], atol=1e-3)
+    np.testing.assert_allclose(result.acceleration["a3_true"], chord[:, 1], atol=1e-3)
+
+
+def test_batches_do_not_change_the_result(blobs_file, device):
+    whole = run_render(blobs_file, case="C2", device=device, **SMALL)
+    pieces = run_render(blobs_file, case="C2", device=device, rays_per_batch=40, **SMALL)
+    for name, values in whole.tracers.items():
+        np.testing.assert_array_equal(pieces.tracers[name], values, err_msg=name)
+    for name, values in whole.rays.items():
+        np.testing.assert_array_equal(pieces.rays[name], values, err_msg=name)
+
+
+def test_memory_is_flat_in_the_number_of_tracers(blobs_file, device):
+    def peak(tracers):
+        tracemalloc.start()
+        run_render(
+            blobs_file,
+            case="C1",
+            frames=1,
+            tracers=tracers,
+            fan=8,
+            pixels=512,
+            rays_per_batch=256,
+            ray_sample=100,
+            device=device,
+        )
+        peak_bytes = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        return peak_bytes
+
+    peak(4)  # builds and caches the kernels
+    small, large = peak(8), peak(64)
+    # per-tracer tables cost ~200 bytes a tracer; a batch of rays ~100 kB
+    assert large - small < 100_000
+
+
+def test_ray_sample_and_status_counts(blobs_file, device):
+    result = run_render(blobs_file, case="C4", device=device, ray_sample=50, **SMALL)
+    rays = result.rays
+    assert len(rays["theta0"]) == 50
+    assert set(rays) >= {"theta0", "deflection", "n_metric", "path_length", "displacement"}
+    assert np.all((rays["tracer_id"] >= 0) & (rays["tracer_id"] < SMALL["tracers"]))
+    counts = result.ray_attrs
+    traced = sum(
+        counts[f"count_{name}"]
+        for name in ("ok", "exit_side", "turned_back", "max_steps", "non_finite")
+    )
+    assert traced == 3 * SMALL["tracers"] * SMALL["fan"] ** 2
+    # a periodic box straight on: all paths are longer than the depth, |Δθ| ≈ |N| S
+    ok = rays["status"] == 0
+    assert np.all(rays["path_length"][ok] >= result.attrs["length_L"] * (1 - 1e-9))
+    np.testing.assert_allclose(
+        rays["deflection"][ok], rays["n_metric"][ok] * rays["path_length"][ok], rtol=0.3
+    )
+
+
+def test_write_render_file_layout(blobs_file, device, tmp_path):
+    result = run_render(blobs_file, case="C1", device=device, frame_image=True, **SMALL)
+    path = tmp_path / "render.h5"
+    write_render(path, result)
+    with h5py.File(path, "r") as h5:
+        assert h5.attrs["rimcl_schema"] == "render" and h5.attrs["schema_version"] == 1
+        assert h5.attrs["case"] == "C1" and h5.attrs["k_rho"] == pytest.approx(2.82e-4)
+        assert h5.attrs["length_L"] == pytest.approx(2 * np.pi)
+        assert h5.attrs["pixel_size"] == pytest.approx(2 * np.pi / SMALL["pixels"])
+        assert h5.attrs["dt"] == pytest.approx(0.01)
+        assert json.loads(h5.attrs["flag_names"])[str(int(TracerFlag.SPLIT))] == "split"
+        assert json.loads(h5.attrs["config"])["tracers"] == SMALL["tracers"]
+        assert "versions" in h5.attrs and "device" in h5.attrs
+        assert len(h5["tracers/x2_meas"]) == 3 * SMALL["tracers"]
+        assert len(h5["velocity/u2_true"]) == len(h5["acceleration/a3_meas"]) == 6
+        assert h5["rays"].attrs["count_ok"] > 0
+    with pytest.raises(RimclError, match="exists"):
+        write_render(path, result)
+    image_path = tmp_path / "frame.png"
+    write_frame_image(image_path, result)
+    from PIL import Image
+
+    with Image.open(image_path) as image:
+        pixels = np.asarray(image)
+        assert "rimcl" in image.info
+    np.testing.assert_array_equal(pixels[::-1], result.frame_image)
+    assert result.frame_image.max() == 1023  # every tracer's reference peaks at full scale
+
+
+def test_field_without_velocity_cannot_track(tmp_path, device):
+    x1, _, _, h = _grid(8, periodic=True)
+    path = tmp_path / "still.h5"
+    write_field(
+        path,
+        density=[1 + 0 * x1] * 3,
+        times=TIMES,
+        origin=(0, 0, 0),
+        spacing=(h, h, h),
+        boundary="periodic",
+    )
+    with pytest.raises(RimclError, match="holds no velocity"):
+        run_render(path, case="C1", device=device, **SMALL)
+    single = run_render(path, case="C1", frames=1, device=device, **SMALL)
+    assert single.velocity is None and single.acceleration is None
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        ({"tracers": 0}, "at least 1"),
+        ({"frames": 4}, "frames must be"),
+        ({"start_frame": 1}, "frames up to 3"),
+        ({"camera": "pinhole"}, "unknown camera"),
+        ({"threshold": 2000}, "threshold"),
+        ({"k_rho": -1.0, "case": None}, "K\\*rho"),
+    ],
+)
+def test_bad_requests_rejected(blobs_file, kw, match):
+    settings = {**SMALL, "case": "C1", **kw}
+    with pytest.raises(RimclError, match=match):
+        run_render(blobs_file, **settings)
+
+
+def test_pupil_that_collects_no_ray_is_an_error(linear_file, device):
+    # seen from 80° off axis, every ray leaves the clamped field through its side
+    with pytest.raises(RimclError, match="no ray"):
+        run_render(
+            linear_file,
+            camera="pupil",
+            view_angle=80.0,
+            camera_distance=10.0,
+            aperture_diameter=0.5,
+            frames=1,
+            device=device,
+            **{**SMALL, "pixels": 256},
+        )
