@@ -21,6 +21,8 @@ _EXPORTS = {
     "STATUS_NAMES": "rimcl.trace",
     "load_field": "rimcl.flow.fieldfile",
     "write_field": "rimcl.flow.fieldfile",
+    "run_render": "rimcl.measure",
+    "write_render": "rimcl.measure",
 }
 
 __all__ = ["__version__", *sorted(_EXPORTS)]
