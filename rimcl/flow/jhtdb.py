@@ -203,16 +203,20 @@ class _Layout:
         moved = np.transpose(dns_values, (*self.order, 3))[..., self.components]
         return np.ascontiguousarray(moved, dtype=np.float32)
 
-    def grid(self, coordinates):
-        """Origin and spacing along ``x1, x2, x3`` and the node counts per axis."""
+    def grid(self, coordinates, spacings=None):
+        """Origin and spacing along ``x1, x2, x3`` and the node counts per axis.
+
+        ``spacings`` (per DNS axis) are used as given when known exactly.
+        """
         origin, spacing, counts = [], [], []
         for letter in self.axes:
             nodes = np.asarray(coordinates[letter], dtype=np.float64)[self.ranges[letter]]
             origin.append(nodes[0])
-            spacing.append(
-                _uniform_spacing(coordinates[letter], COORDINATES[letter])
-                * self.ranges[letter].step
-            )
+            if spacings is None:
+                step = _uniform_spacing(coordinates[letter], COORDINATES[letter])
+            else:
+                step = spacings[letter]
+            spacing.append(step * self.ranges[letter].step)
             counts.append(nodes.size)
         return np.array(origin), np.array(spacing), np.array(counts)
 
@@ -436,7 +440,7 @@ def read_npz(
                     f"got {velocity.shape}"
                 )
         shape = dict(zip(("z", "y", "x"), density.shape[1:], strict=True))
-        coordinates = _npz_coordinates(archive, path, shape)
+        coordinates, spacings = _npz_coordinates(archive, path, shape)
         times = None
         if "times" in archive:
             times = np.asarray(archive["times"], dtype=np.float64).reshape(-1)
@@ -450,7 +454,7 @@ def read_npz(
     if missing:
         raise RimclError(f"{path} has frames 1..{density.shape[0]}; no frame {missing}")
     layout = _Layout(axes, crop, stride, shape)
-    origin, spacing, nodes = layout.grid(coordinates)
+    origin, spacing, nodes = layout.grid(coordinates, spacings)
     picks = [i - 1 for i in wanted]
     return ImportedFlow(
         density=[layout.scalar(density[i][layout.selection]) for i in picks],
@@ -473,7 +477,14 @@ def read_npz(
 
 
 def _npz_coordinates(archive, path, shape):
-    """``xcoor, ycoor, zcoor`` of an npz file, from themselves or from origin/spacing."""
+    """Coordinates of an npz file's nodes per DNS axis, and its spacings if given exactly.
+
+    Returns
+    -------
+    coordinates : dict of str to ndarray
+    spacings : dict of str to float, or None
+        From a ``spacing`` array; None when the grid came as ``xcoor, ycoor, zcoor``.
+    """
     if all(name in archive for name in COORDINATES.values()):
         coordinates = {}
         for letter, name in COORDINATES.items():
@@ -484,17 +495,18 @@ def _npz_coordinates(archive, path, shape):
                     f"along {letter}"
                 )
             coordinates[letter] = values
-        return coordinates
+        return coordinates, None
     if "spacing" not in archive:
         raise RimclError(f"{path} needs xcoor, ycoor, zcoor or spacing (and origin) arrays")
     spacing = np.asarray(archive["spacing"], dtype=np.float64).reshape(-1)
     origin = np.asarray(archive["origin"] if "origin" in archive else np.zeros(3), dtype=float)
     if spacing.size != 3 or origin.size != 3 or not np.all(spacing > 0):
         raise RimclError(f"{path}: spacing and origin must be 3 numbers (x, y, z), spacing > 0")
-    return {
+    coordinates = {
         letter: origin[k] + spacing[k] * np.arange(shape[letter])
         for k, letter in enumerate(DNS_AXES)
     }
+    return coordinates, dict(zip(DNS_AXES, spacing.tolist(), strict=True))
 
 
 def import_flow(
