@@ -26,7 +26,7 @@ from rimcl.stats import (
     angle_deg,
     area_changes,
     density_estimate,
-    excluded_tracers,
+    flagged_tracers,
     position_errors,
     write_json,
 )
@@ -67,7 +67,7 @@ def _new_figure(rows, cols):
 
 
 def _kept_rows(tables, table):
-    excluded_ids, _ = excluded_tracers(tables)
+    excluded_ids, _ = flagged_tracers(tables)
     keep = ~np.isin(table["id"].astype(np.int64), excluded_ids)
     return {name: values[keep] for name, values in table.items()}
 

@@ -12,9 +12,12 @@ Output: one ``stats.json`` document, whose shape is documented in the README:
 - the finite-difference baseline ``u^ref - u`` and ``a^ref - a`` with the same summaries;
 - tracer image shape: peaks of the PDFs of ``ΔA / A`` and of the circularity ``C``.
 
-Relative errors are fractions (not percent). A tracer with any flag set in any of its rows
-is left out of every statistic of its case and counted in ``n_excluded`` under each of its
-flag names, so nothing is dropped without being counted.
+Relative errors are fractions (not percent). A tracer with any bit of ``flags`` set in any
+of its rows (a position that is missing or doubtful) is left out of every statistic of its
+case and counted in ``n_excluded`` under each of its flag names; the bits of ``notes``
+(what happened to the light of an image still measured as a camera would: a clipped peak,
+lost rays) are counted in ``n_noted`` and the tracer is kept. Nothing is dropped without
+being counted.
 """
 
 import dataclasses
@@ -60,6 +63,8 @@ ACCELERATION_COLUMNS = (
     "a3_meas",
     "flags",
 )
+#: Optional per-row columns: bits that record an event without excluding the tracer.
+NOTE_COLUMN = "notes"
 RAY_COLUMNS = ("theta0", "deflection", "n_metric", "path_length", "displacement", "status")
 ROOT_ATTRS = ("case", "k_rho", "delta_n_max", "length_L", "pixel_size", "dt", "flag_names")
 
@@ -92,8 +97,9 @@ class RenderTables:
         The 1-D columns of the groups of the same name; ``tracers`` has one row per tracer
         and frame, ``velocity`` and ``acceleration`` one row per tracer, ``rays`` one row
         per sampled frame-0 ray.
-    ray_status_counts : dict of str to int
-        Count of all traced rays (not only the sampled ones) per status name.
+    ray_counts : dict of str to dict
+        Count of all traced rays (every frame, not only the sampled ones) per status name
+        (and ``vignetted``): ``{"measured": {...}, "reference": {...}}``.
     provenance : dict
         ``config``, ``versions`` and ``device`` of the render run, parsed from JSON.
     """
@@ -110,7 +116,7 @@ class RenderTables:
     velocity: dict
     acceleration: dict
     rays: dict
-    ray_status_counts: dict
+    ray_counts: dict
     provenance: dict
 
 
@@ -147,6 +153,8 @@ def _read_group(h5file, group, columns, path, required=True):
     missing = [name for name in columns if name not in h5file[group]]
     if missing:
         raise RimclError(f"{path}: group {group!r} lacks datasets {', '.join(missing)}")
+    if "flags" in columns:
+        columns = (*columns, NOTE_COLUMN) if NOTE_COLUMN in h5file[group] else columns
     table = {name: np.asarray(h5file[group][name][()]) for name in columns}
     lengths = {name: values.shape for name, values in table.items()}
     if len(set(lengths.values())) != 1 or any(len(shape) != 1 for shape in lengths.values()):
@@ -199,11 +207,12 @@ def load_render(path):
         velocity = _read_group(h5file, "velocity", VELOCITY_COLUMNS, path)
         acceleration = _read_group(h5file, "acceleration", ACCELERATION_COLUMNS, path)
         rays = _read_group(h5file, "rays", RAY_COLUMNS, path, required=False)
-        ray_status_counts = (
-            {key: int(value) for key, value in h5file["rays"].attrs.items()}
-            if "rays" in h5file
-            else {}
-        )
+        ray_counts = {"measured": {}, "reference": {}}
+        for key, value in h5file["rays"].attrs.items() if "rays" in h5file else ():
+            for prefix, kind in (("ref_count_", "reference"), ("count_", "measured")):
+                if key.startswith(prefix):
+                    ray_counts[kind][key[len(prefix) :]] = int(value)
+                    break
         provenance = {
             key: _json_attr(attrs, key, path)
             for key in ("config", "versions", "device")
@@ -225,44 +234,43 @@ def load_render(path):
             velocity=velocity,
             acceleration=acceleration,
             rays=rays,
-            ray_status_counts=ray_status_counts,
+            ray_counts=ray_counts,
             provenance=provenance,
         )
 
 
-def excluded_tracers(tables):
-    """Tracers left out of the statistics, and the count per flag name.
-
-    A tracer is excluded when any of its rows (any frame, velocity, acceleration) has a
-    flag bit set.
+def flagged_tracers(tables, column="flags"):
+    """Tracers with bits set in a flag column, and the count per flag name.
 
     Parameters
     ----------
     tables : RenderTables
+    column : {"flags", "notes"}
+        ``flags``: bits that exclude a tracer; ``notes``: bits that are only counted (a
+        file without a ``notes`` column has none).
 
     Returns
     -------
-    excluded_ids : ndarray of int
-        Sorted ids of the excluded tracers.
+    ids : ndarray of int
+        Sorted ids of the tracers with a bit set in any of their rows (any frame,
+        velocity, acceleration).
     counts : dict of str to int
-        Number of tracers carrying each flag (a tracer with two flags counts under both).
-        Bits missing from ``flag_names`` are named ``bit<value>``.
+        Number of tracers carrying each bit (a tracer with two bits counts under both),
+        for ``flags`` every known flag name (zeros included). Bits missing from
+        ``flag_names`` are named ``bit<value>``.
     """
-    ids = np.concatenate(
-        [tables.tracers["id"], tables.velocity["id"], tables.acceleration["id"]]
-    ).astype(np.int64)
-    flags = np.concatenate(
-        [tables.tracers["flags"], tables.velocity["flags"], tables.acceleration["flags"]]
-    ).astype(np.int64)
-    counts = {name: 0 for name in tables.flag_names.values()}
-    seen_bits = np.bitwise_or.reduce(flags) if flags.size else 0
+    tables_with = [t for t in (tables.tracers, tables.velocity, tables.acceleration) if column in t]
+    ids = np.concatenate([t["id"] for t in tables_with] or [np.empty(0)]).astype(np.int64)
+    bits = np.concatenate([t[column] for t in tables_with] or [np.empty(0)]).astype(np.int64)
+    counts = {name: 0 for name in tables.flag_names.values()} if column == "flags" else {}
+    seen_bits = int(np.bitwise_or.reduce(bits)) if bits.size else 0
     bit = 1
     while bit <= seen_bits:
         if seen_bits & bit:
             name = tables.flag_names.get(bit, f"bit{bit}")
-            counts[name] = int(np.unique(ids[(flags & bit) != 0]).size)
+            counts[name] = int(np.unique(ids[(bits & bit) != 0]).size)
         bit <<= 1
-    return np.unique(ids[flags != 0]), counts
+    return np.unique(ids[bits != 0]), counts
 
 
 def _kept(table, excluded_ids):
@@ -446,7 +454,8 @@ def case_statistics(tables):
         ``n_used``, ``n_excluded``, ``position_error_*``, ``velocity``, ``acceleration``,
         ``baseline``, ``area_change_peak``, ``circularity_peak``, ``rays``).
     """
-    excluded_ids, excluded_counts = excluded_tracers(tables)
+    excluded_ids, excluded_counts = flagged_tracers(tables)
+    noted_ids, noted_counts = flagged_tracers(tables, NOTE_COLUMN)
     tracers = _kept(tables.tracers, excluded_ids)
     velocity = _kept(tables.velocity, excluded_ids)
     acceleration = _kept(tables.acceleration, excluded_ids)
@@ -464,6 +473,8 @@ def case_statistics(tables):
         "n_tracers": n_tracers,
         "n_used": n_tracers - int(excluded_ids.size),
         "n_excluded": excluded_counts,
+        "n_noted": noted_counts,
+        "n_used_noted": int(np.setdiff1d(noted_ids, excluded_ids).size),
         "position_error_peak_over_L": peak_over_length,
         "position_error_peak_px": peak_over_length * tables.length / tables.pixel_size,
         "position_error_median_over_L": (
@@ -480,7 +491,8 @@ def case_statistics(tables):
         "rays": {
             "n_rays": rays_total,
             "n_rays_ok": int(np.sum(tables.tracers["n_rays_ok"])),
-            "status_counts_frame0": tables.ray_status_counts,
+            "status_counts": tables.ray_counts["measured"],
+            "reference_status_counts": tables.ray_counts["reference"],
         },
     }
 

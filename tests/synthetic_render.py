@@ -9,7 +9,13 @@ import json
 import h5py
 import numpy as np
 
-FLAG_NAMES = {"1": "below_threshold", "2": "split", "4": "window_edge"}
+FLAG_NAMES = {
+    "1": "below_threshold",
+    "2": "split",
+    "4": "window_edge",
+    "16": "rays_failed",
+    "128": "saturated",
+}
 
 
 def standardized(rng, size):
@@ -33,6 +39,7 @@ def write_render_file(
     acceleration_bias=0.5,
     acceleration_spread=3.0,
     flagged=None,
+    noted=None,
     seed=0,
 ):
     """Write a render file whose errors have exactly the given statistics.
@@ -49,6 +56,8 @@ def write_render_file(
     flagged : dict of int to int, optional
         Tracer id to flag bits; those tracers get NaN errors (which must not reach the
         statistics).
+    noted : dict of int to int, optional
+        Tracer id to note bits (written to a ``notes`` column; the tracer stays valid).
 
     Returns
     -------
@@ -57,6 +66,7 @@ def write_render_file(
     """
     rng = np.random.default_rng(seed)
     flagged = flagged or {}
+    noted = noted or {}
     ids = np.arange(n_tracers)
     frames = 3
     tracer_id = np.repeat(ids, frames)
@@ -72,6 +82,11 @@ def write_render_file(
     area_meas = area_ref + np.round(40.0 * k_rho / 3.34e-1 * rng.uniform(0, 2, rows))
     row_flags = np.zeros(rows, dtype=np.int32)
     tracer_flags = np.zeros(n_tracers, dtype=np.int32)
+    row_notes = np.zeros(rows, dtype=np.int32)
+    tracer_notes = np.zeros(n_tracers, dtype=np.int32)
+    for tracer, bits in noted.items():
+        row_notes[tracer * frames + 2] = bits
+        tracer_notes[tracer] = bits
     for tracer, bits in flagged.items():
         row_flags[tracer * frames + 1] = bits
         tracer_flags[tracer] = bits
@@ -80,7 +95,7 @@ def write_render_file(
     injected = {}
 
     def kinematic(symbol, bias, spread, scale):
-        columns = {"id": ids, "flags": tracer_flags}
+        columns = {"id": ids, "flags": tracer_flags, "notes": tracer_notes}
         for component in ("2", "3"):
             truth = scale * rng.choice([-1.0, 1.0], n_tracers) * rng.uniform(0.5, 1.5, n_tracers)
             relative = bias + spread * standardized(rng, n_tracers)
@@ -132,6 +147,7 @@ def write_render_file(
             "n_rays": np.full(rows, 1024),
             "n_rays_ok": np.full(rows, 1024),
             "flags": row_flags,
+            "notes": row_notes,
         }
         for group, columns in (
             ("tracers", tracers),
@@ -150,5 +166,9 @@ def write_render_file(
         }
         for name, values in rays.items():
             h5.create_dataset(f"rays/{name}", data=values)
-        h5["rays"].attrs.update(ok=n_tracers * frames * 1024, exit_side=0)
+        h5["rays"].attrs.update(
+            count_ok=n_tracers * frames * 1024,
+            count_exit_side=0,
+            ref_count_ok=n_tracers * frames * 1024,
+        )
     return injected

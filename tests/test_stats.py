@@ -83,11 +83,27 @@ def test_flagged_tracers_are_counted_per_flag_and_left_out(tmp_path):
     case = case_statistics(load_render(path))
     assert case["n_tracers"] == 400
     assert case["n_used"] == 397
-    assert case["n_excluded"] == {"below_threshold": 1, "split": 1, "window_edge": 2}
+    assert case["n_excluded"] == {
+        "below_threshold": 1,
+        "split": 1,
+        "window_edge": 2,
+        "rays_failed": 0,
+        "saturated": 0,
+    }
     assert case["velocity"]["u2"]["n"] == 397
     # the flagged rows hold NaN: any leak would make these non-finite
     assert np.isfinite(case["velocity"]["u2"]["random"])
     assert np.isfinite(case["position_error_peak_over_L"])
+
+
+def test_notes_are_counted_and_the_tracers_kept(tmp_path):
+    path = tmp_path / "noted.h5"
+    write_render_file(path, flagged={4: 2}, noted={4: 128, 5: 128, 6: 16 | 128})
+    case = case_statistics(load_render(path))
+    assert case["n_noted"] == {"saturated": 3, "rays_failed": 1}
+    assert case["n_used_noted"] == 2
+    assert case["n_used"] == 399
+    assert case["velocity"]["u3"]["n"] == 399
 
 
 def test_unknown_flag_bits_are_named_not_dropped(tmp_path):
@@ -149,7 +165,9 @@ def test_stats_document_sorted_by_g_with_provenance(tmp_path):
     assert [i["case"] for i in stats["config"]["inputs"]] == ["C1", "C4"]
     assert stats["config"]["inputs"][0]["config"]["case"] == "C1"
     assert "numpy" in stats["versions"]
-    assert stats["cases"][0]["rays"]["status_counts_frame0"] == {"ok": 1200 * 1024, "exit_side": 0}
+    rays = stats["cases"][0]["rays"]
+    assert rays["status_counts"] == {"ok": 1200 * 1024, "exit_side": 0}
+    assert rays["reference_status_counts"] == {"ok": 1200 * 1024}
 
 
 def test_run_stats_without_figures_writes_strict_json(tmp_path):
