@@ -21,6 +21,8 @@ _EXPORTS = {
     "STATUS_NAMES": "rimcl.trace",
     "load_field": "rimcl.flow.fieldfile",
     "write_field": "rimcl.flow.fieldfile",
+    "FieldFile": "rimcl.flow.fieldfile",
+    "sample_path": "rimcl.flow",
     "run_render": "rimcl.measure",
     "write_render": "rimcl.measure",
 }

@@ -29,6 +29,7 @@ import numpy as np
 from rimcl.derivatives import gradient as compute_gradient
 from rimcl.errors import RimclError
 from rimcl.flow.fieldfile import write_field
+from rimcl.provenance import check_output
 
 DNS_AXES = ("x", "y", "z")
 COORDINATES = {"x": "xcoor", "y": "ycoor", "z": "zcoor"}
@@ -203,6 +204,16 @@ class _Layout:
         moved = np.transpose(dns_values, (*self.order, 3))[..., self.components]
         return np.ascontiguousarray(moved, dtype=np.float32)
 
+    def provenance(self, source, paths, indices):
+        """Attributes recording where the frames came from and how they were mapped."""
+        return {
+            "source": source,
+            "input_files": [str(p) for p in paths],
+            "time_indices": list(indices),
+            "axes": ",".join(f"x{k + 1}={a}" for k, a in enumerate(self.axes)),
+            "crop_nodes": {a: [r.start, r.stop, r.step] for a, r in self.ranges.items()},
+        }
+
     def grid(self, coordinates, spacings=None):
         """Origin and spacing along ``x1, x2, x3`` and the node counts per axis.
 
@@ -375,13 +386,6 @@ def read_cutouts(
     times = np.array(
         [t0 + (index - 1) * dt if t is None else t for index, t in zip(wanted, stored, strict=True)]
     )
-    attrs = {
-        "source": "JHTDB cut-out",
-        "input_files": [str(p) for p in paths],
-        "time_indices": list(wanted),
-        "axes": ",".join(f"x{k + 1}={a}" for k, a in enumerate(layout.axes)),
-        "crop_nodes": {a: [r.start, r.stop, r.step] for a, r in layout.ranges.items()},
-    }
     return ImportedFlow(
         density=density,
         velocity=velocity,
@@ -390,7 +394,7 @@ def read_cutouts(
         origin=origin,
         spacing=spacing,
         boundary=_boundary(boundary, spacing, nodes, period),
-        attrs=attrs,
+        attrs=layout.provenance("JHTDB cut-out", paths, wanted),
     )
 
 
@@ -466,13 +470,7 @@ def read_npz(
         origin=origin,
         spacing=spacing,
         boundary=_boundary(boundary, spacing, nodes, period),
-        attrs={
-            "source": "npz",
-            "input_files": [str(path)],
-            "time_indices": list(wanted),
-            "axes": ",".join(f"x{k + 1}={a}" for k, a in enumerate(layout.axes)),
-            "crop_nodes": {a: [r.start, r.stop, r.step] for a, r in layout.ranges.items()},
-        },
+        attrs=layout.provenance("npz", [path], wanted),
     )
 
 
@@ -536,10 +534,10 @@ def import_flow(
     gradient : {"auto", "spectral", "fd2", "fd4", "fd6", "none"}
         Density gradient to store: ``auto`` is spectral for a periodic box and 4th-order
         central differences otherwise; ``none`` stores none (readers compute it).
+    axes, crop, stride, frames, t0, dt, boundary, period
+        As :func:`read_cutouts`.
     title : str, optional
     overwrite : bool
-    **others
-        As :func:`read_cutouts`.
 
     Returns
     -------
@@ -547,6 +545,7 @@ def import_flow(
     """
     if gradient not in GRADIENT_METHODS:
         raise RimclError(f"gradient must be one of {GRADIENT_METHODS}, got {gradient!r}")
+    check_output(output, overwrite)
     paths = [Path(p) for p in paths]
     options = dict(
         axes=axes, crop=crop, stride=stride, frames=frames, t0=t0, dt=dt,
@@ -558,8 +557,6 @@ def import_flow(
         flow = read_npz(paths[0], **options)
     else:
         flow = read_cutouts(paths, **options)
-    if Path(output).exists() and not overwrite:
-        raise RimclError(f"{output} exists (use --overwrite to replace it)")
     periodic = flow.boundary == "periodic"
     method = ("spectral" if periodic else "fd4") if gradient == "auto" else gradient
     gradients = None

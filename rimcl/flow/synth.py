@@ -26,13 +26,13 @@ the same flow better.
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import scipy.fft
 
 from rimcl.errors import RimclError
 from rimcl.flow.fieldfile import write_field
+from rimcl.provenance import check_output
 
 RHO_LIGHT = 1.0
 RHO_HEAVY = 1.105
@@ -482,7 +482,8 @@ def write_synth(result, path, *, overwrite=False):
 def run_synth(path, *, overwrite=False, **options):
     """Run :func:`synthesize` and write the result to ``path``.
 
-    The output is checked before the run, so an existing file is refused at once.
+    The output is checked before the run, so an existing file or an unwritable
+    directory is refused at once.
 
     Parameters
     ----------
@@ -495,8 +496,7 @@ def run_synth(path, *, overwrite=False, **options):
     -------
     SynthResult
     """
-    if Path(path).exists() and not overwrite:
-        raise RimclError(f"{path} exists (use --overwrite to replace it)")
+    check_output(path, overwrite)
     result = synthesize(**options)
     write_synth(result, path, overwrite=overwrite)
     return result
