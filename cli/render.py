@@ -234,3 +234,9 @@ def _summary(result, device_name):
         )
     times = ", ".join(f"{stage} {seconds:.2f} s" for stage, seconds in result.timings.items())
     click.echo(f"time per stage: {times}")
+    steps = result.ray_attrs["ray_steps"] + result.ray_attrs["ref_ray_steps"]
+    if result.timings["trace"] > 0:
+        click.echo(
+            f"{steps:.3g} ray-steps traced ({steps / result.timings['trace']:.3g} per second, "
+            "reference included)"
+        )

@@ -89,6 +89,8 @@ class Reference:
         the 10-bit factor reused for the measured images).
     ray_counts : dict of str to int
         Trace status counts of all reference rays, plus ``vignetted``.
+    ray_steps : int
+        Integration steps of all reference rays.
     """
 
     key: dict
@@ -97,6 +99,7 @@ class Reference:
     outside: np.ndarray
     images: dict
     ray_counts: dict
+    ray_steps: int
 
 
 @dataclasses.dataclass
@@ -229,6 +232,13 @@ class _Pass:
         self.timings = timings
         self.status_counts = np.zeros(len(STATUS_NAMES), dtype=np.int64)
         self.vignetted = 0
+        self.ray_steps = 0
+
+    def counts(self):
+        """Trace status counts of every ray of this pass, plus the vignetted ones."""
+        counts = {name: int(c) for name, c in zip(STATUS_NAMES, self.status_counts, strict=True)}
+        counts["vignetted"] = int(self.vignetted)
+        return counts
 
     def image_tracer(self, frame, tracer, points, flags, scale=None, canvas=None):
         """Render and locate one tracer from the image points ``(K, 2)`` of its rays."""
@@ -293,6 +303,7 @@ def _image_frame(
         collected = ok & camera.collected(result.end_pos, result.end_dir)
         pass_.status_counts += np.bincount(result.status, minlength=len(STATUS_NAMES))
         pass_.vignetted += int(np.count_nonzero(ok & ~collected))
+        pass_.ray_steps += int(result.steps.sum())
         if sampler is not None:
             sampler.take(ids[0] * rays, result, collected)
         points = result.image_pos[:, 1:].reshape(len(ids), rays, 2)
@@ -351,12 +362,6 @@ class _RaySampler:
         table = {name: np.concatenate([p[name] for p in self.parts]) for name in names}
         table["tracer_id"] = table["ray"] // rays_per_tracer
         return table
-
-
-def _counts_dict(status_counts, vignetted):
-    counts = {name: int(c) for name, c in zip(STATUS_NAMES, status_counts, strict=True)}
-    counts["vignetted"] = int(vignetted)
-    return counts
 
 
 def _progress(enabled, total):
@@ -718,7 +723,8 @@ def _make_reference(
         true_velocity=true_velocity,
         outside=outside,
         images=ref.images,
-        ray_counts=_counts_dict(ref.status_counts, ref.vignetted),
+        ray_counts=ref.counts(),
+        ray_steps=ref.ray_steps,
     )
 
 
@@ -822,10 +828,10 @@ def _assemble(
         "fov_hi": scene.fov_hi,
         "field": config["field"],
     }
-    ray_attrs = {
-        f"count_{k}": v for k, v in _counts_dict(measured.status_counts, measured.vignetted).items()
-    }
+    ray_attrs = {f"count_{k}": v for k, v in measured.counts().items()}
     ray_attrs.update({f"ref_count_{k}": v for k, v in reference.ray_counts.items()})
+    ray_attrs["ray_steps"] = measured.ray_steps
+    ray_attrs["ref_ray_steps"] = reference.ray_steps
     ray_attrs["sampled_from_frame"] = 0
     return RenderResult(
         attrs=attrs,

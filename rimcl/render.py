@@ -34,6 +34,7 @@ FULL_SCALE = 1023  # 10-bit camera
 # the Gaussian is cut at this many σ (scipy's gaussian_filter ``truncate``); windows are
 # padded by as much so that no tracer image is cut by its window
 TRUNCATE_SIGMAS = 4.0
+_EXACT_CHUNK = 2048  # rays per BLAS product of the exact renderer
 
 
 @dataclasses.dataclass(frozen=True)
@@ -162,9 +163,14 @@ class Renderer:
             cumulative = ndtr((edges[None, :] - coords[:, None]) / self.psf_sigma)
             return np.diff(cumulative, axis=1)
 
-        columns = pixel_integrals(local[:, 0], window.width)
-        rows = pixel_integrals(local[:, 1], window.height)
-        return (rows * weights[:, None]).T @ columns
+        image = np.zeros(window.shape)
+        # rays in chunks: the erf tables of a chunk stay a few MB even in the largest window
+        for start in range(0, len(local), _EXACT_CHUNK):
+            part = slice(start, start + _EXACT_CHUNK)
+            columns = pixel_integrals(local[part, 0], window.width)
+            rows = pixel_integrals(local[part, 1], window.height)
+            image += (rows * weights[part, None]).T @ columns
+        return image
 
     def _render_paper(self, local, weights, window):
         cells = np.floor(local).astype(np.int64)
