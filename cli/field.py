@@ -12,16 +12,6 @@ _output_option = click.option(
 _field_argument = click.argument(
     "field_path", required=False, metavar="[FIELD]", type=click.Path(dir_okay=False)
 )
-_case_options = [
-    click.option("--case", default=None, help="Gladstone–Dale case C0..C4: show δn and |∇n|."),
-    click.option("--k-rho", type=float, default=None, help="Custom Gladstone–Dale product G = Kρ."),
-]
-
-
-def _with_case_options(func):
-    for option in reversed(_case_options):
-        func = option(func)
-    return func
 
 
 @click.group()
@@ -202,7 +192,8 @@ def info(field_path, as_json):
     show_default=True,
     help="What to draw.",
 )
-@_with_case_options
+@click.option("--case", default=None, help="Gladstone–Dale case C0..C4: show δn and |∇n|.")
+@click.option("--k-rho", type=float, default=None, help="Custom Gladstone–Dale product G = Kρ.")
 @click.option(
     "-o",
     "--output",
