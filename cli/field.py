@@ -62,7 +62,7 @@ def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, outpu
 
     \b
       rimcl field synth --grid 32 --seed 1 -o f32.h5        # seconds
-      rimcl field synth --grid 64 -o mixing64.h5            # about half a minute
+      rimcl field synth --grid 64 -o mixing64.h5            # 30-60 s on 2 cores
     """
     from rimcl.flow.synth import history_table, run_synth
 
