@@ -582,8 +582,9 @@ def run_stats(paths, out_dir, overwrite=False, figures=True, config=None):
     out_dir = Path(out_dir)
     all_tables = check_cases([load_render(path) for path in paths])
     stats_path = out_dir / "stats.json"
-    if stats_path.exists() and not overwrite:
-        raise RimclError(f"{stats_path} exists (use --overwrite to replace it)")
+    for existing in (stats_path, out_dir / "figures") if figures else (stats_path,):
+        if existing.exists() and not overwrite:
+            raise RimclError(f"{existing} exists (use --overwrite to replace it)")
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
