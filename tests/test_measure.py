@@ -242,7 +242,9 @@ def test_write_render_file_layout(blobs_file, device, tmp_path):
         pixels = np.asarray(image)
         assert "rimcl" in image.info
     np.testing.assert_array_equal(pixels[::-1], result.frame_image)
-    assert result.frame_image.max() == 1023  # every tracer's reference peaks at full scale
+    # six tracers far apart: the frame's brightest pixel is the brightest measured image's
+    first = result.tracers["frame"] == 0
+    assert result.frame_image.max() == min(round(result.tracers["peak_meas"][first].max()), 1023)
 
 
 def test_field_without_velocity_cannot_track(tmp_path, device):
