@@ -164,12 +164,12 @@ def render(
       rimcl render --tracers 50 --frame-image frame.png -o look.h5
     """
     from rimcl.device import describe_device
-    from rimcl.measure import run_render, write_frame_image, write_render
+    from rimcl.measure import check_frame_image, run_render, write_frame_image, write_render
     from rimcl.provenance import check_output
 
     check_output(output, overwrite)
     if frame_image is not None:
-        check_output(frame_image, overwrite)
+        check_frame_image(frame_image, overwrite)
     if case is None and k_rho is None:
         case = "C1"
     result = run_render(

@@ -37,7 +37,7 @@ from rimcl.centroid import (
 )
 from rimcl.errors import RimclError
 from rimcl.field import Field
-from rimcl.provenance import atomic_path, stamp_h5, to_json
+from rimcl.provenance import atomic_path, check_output, stamp_h5, to_json
 from rimcl.render import FrameImage, Renderer, quantize, scale_for
 from rimcl.trace import STATUS_NAMES, default_step, trace_rays
 from rimcl.track import SheetVelocity, first_difference, integrate_tracks, second_difference
@@ -152,7 +152,8 @@ def _open_source(field, stack):
         from rimcl.flow.fieldfile import FieldFile
 
         return stack.enter_context(FieldFile(field)), str(Path(field).resolve())
-    return field, str(getattr(field, "path", "<in memory>"))
+    path = getattr(field, "path", None)
+    return field, "<in memory>" if path is None else str(Path(path).resolve())
 
 
 def _case_of(source, case, k_rho):
@@ -504,8 +505,6 @@ def run_render(
         )
     if int(frames) not in (1, 2, 3):
         raise RimclError(f"frames must be 1, 2 or 3, got {frames}")
-    if int(tracers) < 1:
-        raise RimclError(f"the number of tracers must be at least 1, got {tracers}")
     if not (np.isfinite(threshold) and 0 <= threshold < 1023):
         raise RimclError(f"the threshold must be in [0, 1023) counts, got {threshold}")
     if int(pixels) < 1:
@@ -887,6 +886,19 @@ def write_render(path, result, overwrite=False):
     return path
 
 
+def check_frame_image(path, overwrite=False):
+    """Refuse, before any work, a frame-image path that is not PNG or TIFF or not writable.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    path = Path(path)
+    if path.suffix.lower() not in (".png", ".tif", ".tiff"):
+        raise RimclError(f"frame image {path} must end in .png, .tif or .tiff")
+    return check_output(path, overwrite)
+
+
 def write_frame_image(path, result, overwrite=False):
     """Write the full first-frame image as a 16-bit PNG or TIFF (x3 upwards).
 
@@ -898,14 +910,11 @@ def write_frame_image(path, result, overwrite=False):
 
     if result.frame_image is None:
         raise RimclError("this result holds no frame image (run with frame_image=True)")
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in (".png", ".tif", ".tiff"):
-        raise RimclError(f"frame image {path} must end in .png, .tif or .tiff")
+    path = check_frame_image(path, overwrite)
     note = to_json({"config": result.config, "versions": versions()})
     image = Image.fromarray(np.ascontiguousarray(result.frame_image[::-1]))
     with atomic_path(path, overwrite=overwrite) as tmp:
-        if suffix == ".png":
+        if path.suffix.lower() == ".png":
             info = PngImagePlugin.PngInfo()
             info.add_text("rimcl", note)
             image.save(tmp, format="PNG", pnginfo=info)

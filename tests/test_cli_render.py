@@ -124,6 +124,37 @@ def test_missing_output_directory_is_refused_before_any_work(box, tmp_path):
     assert "does not exist" in result.output
 
 
+def test_unwritable_output_directory_is_refused(box, tmp_path, monkeypatch):
+    import os
+
+    # root may write anywhere: stand in for a read-only directory
+    readable = os.access
+    monkeypatch.setattr(
+        os, "access", lambda path, mode, **kw: mode != os.W_OK and readable(path, mode, **kw)
+    )
+    result = _run(["--field", box, *QUICK, "-o", str(tmp_path / "out.h5")])
+    assert result.exit_code == 1
+    assert "not writable" in result.output
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_frame_image_must_be_png_or_tiff(box, tmp_path):
+    result = _run(
+        [
+            "--field",
+            box,
+            *QUICK,
+            "-o",
+            str(tmp_path / "o.h5"),
+            "--frame-image",
+            str(tmp_path / "frame.jpg"),
+        ]
+    )
+    assert result.exit_code == 1
+    assert ".png, .tif or .tiff" in result.output
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_help_lists_the_options():
     result = CliRunner().invoke(cli, ["render", "--help"])
     assert result.exit_code == 0
