@@ -18,6 +18,7 @@ Output file (``rimcl_schema = "render"``, ``schema_version = 1``), written by
 import dataclasses
 import json
 import math
+import numbers
 import time
 from contextlib import ExitStack
 from pathlib import Path
@@ -497,7 +498,7 @@ def run_render(
     -------
     RenderResult
     """
-    from rimcl.device import select_device
+    from rimcl.device import describe_device, select_device
 
     if centroid_weights not in CENTROID_WEIGHTS:
         raise RimclError(
@@ -509,7 +510,7 @@ def run_render(
         raise RimclError(f"the threshold must be in [0, 1023) counts, got {threshold}")
     if int(pixels) < 1:
         raise RimclError(f"the image needs at least 1 pixel, got {pixels}")
-    if step is not None and not (isinstance(step, (int, float)) and step > 0):
+    if step is not None and not (isinstance(step, numbers.Real) and step > 0):
         raise RimclError(f"the step must be a positive number (or None: half a cell), got {step!r}")
     frames = int(frames)
     with ExitStack() as stack:
@@ -575,6 +576,7 @@ def run_render(
                 "interp": interp,
                 "precision": precision,
                 "step": None if step is None else float(step),
+                "device": describe_device(device),
             },
         }
         ref_step = _reference_step(step, source)
@@ -643,7 +645,6 @@ def run_render(
             **key,
             "case": case_name,
             "k_rho": g,
-            "frames_used": frames,
             "start_frame": int(start_frame),
             "rays_per_batch": int(rays_per_batch),
             "ray_sample": int(ray_sample),
