@@ -32,6 +32,7 @@ def _case_list(_ctx, _param, value):
     help="Print the default scene (every key, documented) and exit.",
 )
 @click.option("--force", is_flag=True, help="Redo every case and the statistics.")
+@click.option("--no-figures", is_flag=True, help="Skip the figures (stats and summary only).")
 @click.option(
     "--field",
     "field_path",
@@ -64,6 +65,7 @@ def study(
     out_dir,
     print_default_scene,
     force,
+    no_figures,
     field_path,
     cases,
     tracers,
@@ -109,10 +111,18 @@ def study(
         "run.device": device_spec,
     }
     scene = load_scene(scene_file, overrides)
-    result = run_study(scene, out_dir, force=force, progress=not no_progress, report=click.echo)
+    result = run_study(
+        scene,
+        out_dir,
+        force=force,
+        figures=not no_figures,
+        progress=not no_progress,
+        report=click.echo,
+    )
     echo_case_lines(result.stats)
     click.echo(
-        f"{len(result.ran)} cases measured, {len(result.skipped)} kept; wrote "
-        f"{Path(out_dir) / 'summary.md'}, stats.json and figures/ in "
-        f"{result.wall_seconds:.1f} s"
+        f"{len(result.ran)} cases measured, {len(result.skipped)} kept; "
+        f"{Path(out_dir) / 'summary.md'} and stats.json "
+        + ("written" if result.stats_redone else "up to date")
+        + f"; {result.wall_seconds:.1f} s"
     )

@@ -144,15 +144,20 @@ def case_path(out_dir, case):
     return Path(out_dir) / "cases" / f"{case}.h5"
 
 
-def _up_to_date(out_dir, case_files):
+def _up_to_date(out_dir, case_files, figures):
+    from rimcl.figures import FIGURE_NAMES
+
     summary, stats = out_dir / "summary.md", out_dir / "stats.json"
-    if not (summary.exists() and stats.exists()):
+    needed = [summary, stats]
+    if figures:
+        needed += [out_dir / "figures" / f"{name}.png" for name in FIGURE_NAMES]
+    if not all(path.exists() for path in needed):
         return False
     inputs = [out_dir / "scene.toml", *case_files]
     return summary.stat().st_mtime >= max(path.stat().st_mtime for path in inputs)
 
 
-def run_study(scene, out_dir, *, force=False, progress=False, report=None):
+def run_study(scene, out_dir, *, force=False, figures=True, progress=False, report=None):
     """Run every case of a scene, then the statistics, figures and summary.
 
     Parameters
@@ -163,6 +168,8 @@ def run_study(scene, out_dir, *, force=False, progress=False, report=None):
         Study directory (created if missing).
     force : bool
         Redo every case and the statistics even if finished.
+    figures : bool
+        Also draw the figures (the statistics and summary are always written).
     progress : bool
         Show progress bars.
     report : callable, optional
@@ -206,18 +213,18 @@ def run_study(scene, out_dir, *, force=False, progress=False, report=None):
         ran.append(name)
         say(f"[{index}/{len(names)}] {name}: done in {seconds[name]:.1f} s")
     case_files = [case_path(out_dir, name) for name in names]
-    if not force and not ran and _up_to_date(out_dir, case_files):
+    if not force and not ran and _up_to_date(out_dir, case_files, figures):
         say("statistics, figures and summary are up to date")
         stats = json.loads((out_dir / "stats.json").read_text())
         return StudyResult(
             out_dir, stats, ran, skipped, seconds, False, time.perf_counter() - started
         )
-    say("statistics and figures")
-    stats = write_study_outputs(out_dir, scene, case_files)
+    say("statistics and figures" if figures else "statistics")
+    stats = write_study_outputs(out_dir, scene, case_files, figures)
     return StudyResult(out_dir, stats, ran, skipped, seconds, True, time.perf_counter() - started)
 
 
-def write_study_outputs(out_dir, scene, case_files):
+def write_study_outputs(out_dir, scene, case_files, figures=True):
     """``stats.json``, the figures and ``summary.md`` (last) of finished case files.
 
     Returns
@@ -236,7 +243,8 @@ def write_study_outputs(out_dir, scene, case_files):
         all_tables.append(tables)
     all_tables = check_cases(all_tables)
     stats = compute_stats(all_tables, config={"scene": scene, "study_dir": str(out_dir)})
-    write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
+    if figures:
+        write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
     write_json(out_dir / "stats.json", stats, overwrite=True)
     _write_text(out_dir / "summary.md", summary_markdown(stats, scene))
     return stats
@@ -319,7 +327,7 @@ def summary_markdown(stats, scene):
         "G = Kρ",
         "Δn_max",
         "tracers used",
-        "|ε_x| peak / L",
+        "position-error peak / L",
         "u3 systematic",
         "u3 random",
         "a3 systematic",
@@ -380,7 +388,7 @@ def summary_markdown(stats, scene):
     header = [
         "",
         "Δn_max",
-        "|ε_x| peak / L",
+        "position-error peak / L",
         "velocity systematic",
         "velocity random",
         "acceleration systematic",

@@ -97,7 +97,7 @@ def test_render_arguments_map_every_scene_choice():
         }
     )
     air, water = render_arguments(scene, "C1"), render_arguments(scene, "C4")
-    assert air["threshold"] == 100.0
+    assert air["threshold"] == default_scene()["renderer"]["threshold"]
     assert water["threshold"] == 40.0
     assert air["field"] == "/data/flow.h5"
     assert (air["depth"], air["step"], air["device"], air["frames"]) == (2.0, 0.02, "pocl", 3)
