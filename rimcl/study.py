@@ -191,7 +191,9 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
     say = report or (lambda line: None)
     out_dir = Path(out_dir)
     _check_directory(out_dir, scene, force)
-    _write_text(out_dir / "scene.toml", scene_text(scene))
+    scene_path, text = out_dir / "scene.toml", scene_text(scene)
+    if not scene_path.exists() or scene_path.read_text() != text:
+        _write_text(scene_path, text)
     names = scene["cases"]["names"]
     ran, skipped, seconds = [], [], {}
     references = {}  # threshold -> reference images (they depend on it, not on the case)
