@@ -25,6 +25,11 @@ _EXPORTS = {
     "sample_path": "rimcl.flow",
     "run_render": "rimcl.measure",
     "write_render": "rimcl.measure",
+    "load_render": "rimcl.stats",
+    "compute_stats": "rimcl.stats",
+    "run_stats": "rimcl.stats",
+    "load_scene": "rimcl.scene",
+    "run_study": "rimcl.study",
 }
 
 __all__ = ["__version__", *sorted(_EXPORTS)]
