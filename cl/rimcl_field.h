@@ -2,14 +2,21 @@
  * rimcl_field.h -- refractive index n and its gradient at a point.
  *
  * Purpose: field_sample(p) -> (n, dn/dx1, dn/dx2, dn/dx3) at position p (x1, x2, x3),
- * in the working precision `real` (rimcl_real.h).
+ * in the working precision `real` (rimcl_real.h), for one ray; field_sample_lanes does
+ * the same for every active lane of a work-item.
  * Required defines:
- *   RIMCL_FIELD    RIMCL_FIELD_GRID (0): gridded, trilinear interpolation of the
- *                  float4 nodes (delta_n, dn/dx1, dn/dx2, dn/dx3), n = n_ref + delta_n;
+ *   RIMCL_FIELD    RIMCL_FIELD_GRID (0): gridded, interpolated as RIMCL_INTERP says,
+ *                  n = n_ref + delta_n;
  *                  closed forms for verification: RIMCL_FIELD_UNIFORM (1) n = a0;
  *                  RIMCL_FIELD_GRIN (2) n^2 = a0^2 (1 - a1^2 x2^2);
  *                  RIMCL_FIELD_FISHEYE (3) n = a0 / (1 + x1^2 + x2^2);
  *                  RIMCL_FIELD_LINEAR (4) n = a0 + a1 x2.
+ *   RIMCL_INTERP   (gridded fields) RIMCL_INTERP_TRILINEAR (0, default): software
+ *                  trilinear interpolation of float4 nodes (delta_n, dn/dx1, dn/dx2,
+ *                  dn/dx3); RIMCL_INTERP_TEXTURE (1): the same nodes in an image3d_t
+ *                  (RGBA float) read with the hardware's linear filter;
+ *                  RIMCL_INTERP_BSPLINE3 (2): cubic B-spline of delta_n with its
+ *                  analytic gradient (rimcl_bspline.h).
  *   RIMCL_PERIODIC 1: the grid wraps (holds one period, endpoint excluded);
  *                  0: positions are clamped to the grid (edge values outside).
  * Grid memory order: C-order (n3, n2, n1), x1 fastest; counts = (n1, n2, n3).
@@ -27,67 +34,188 @@
 #define RIMCL_FIELD_FISHEYE 3
 #define RIMCL_FIELD_LINEAR 4
 
+#define RIMCL_INTERP_TRILINEAR 0
+#define RIMCL_INTERP_TEXTURE 1
+#define RIMCL_INTERP_BSPLINE3 2
+
 #ifndef RIMCL_FIELD
 #error "RIMCL_FIELD must be defined (0 grid, 1 uniform, 2 grin, 3 fisheye, 4 linear)"
 #endif
 #ifndef RIMCL_PERIODIC
 #define RIMCL_PERIODIC 0
 #endif
+#ifndef RIMCL_INTERP
+#define RIMCL_INTERP RIMCL_INTERP_TRILINEAR
+#endif
 
-#define FIELD_ARGS __global const float4 *grid, int4 counts, __constant const float *params
+/* The field argument of every kernel and sampler: what one grid node holds. */
+#if RIMCL_FIELD == RIMCL_FIELD_GRID && RIMCL_INTERP == RIMCL_INTERP_TEXTURE
+#define FIELD_GRID_TYPE __read_only image3d_t
+#elif RIMCL_FIELD == RIMCL_FIELD_GRID && RIMCL_INTERP == RIMCL_INTERP_BSPLINE3
+#define FIELD_GRID_TYPE __global const float *
+#else
+#define FIELD_GRID_TYPE __global const float4 *
+#endif
+#define FIELD_ARGS FIELD_GRID_TYPE grid, int4 counts, __constant const float *params
 #define FIELD_PASS grid, counts, params
+
+/* n and grad n of every lane, in lane form */
+typedef struct {
+    lreal n, g1, g2, g3;
+} lsample;
 
 #if RIMCL_FIELD == RIMCL_FIELD_GRID
 
-/* Lower node index and weight of coordinate u (in cells) along an axis of n nodes. */
-inline int cell_of(real u, int n, real *w, int *upper)
+/* Position in cells (node i at u = i) of point p. */
+RIMCL_INLINE real3 grid_coordinates(__constant const float *params, real3 p)
+{
+    return (p - PARAM3(params, P_ORIGIN_HI, P_ORIGIN_LO)) * PARAM3(params, P_INVH_HI, P_INVH_LO);
+}
+
+#if RIMCL_INTERP == RIMCL_INTERP_TRILINEAR
+
+/* Lower node index, weight and index step to the upper node along an axis of n nodes,
+ * for every lane. NaN or huge u (a ray that has failed) still gives an index inside
+ * the grid. */
+RIMCL_INLINE lint lanes_cell_of(lreal u, int n, lreal *w, lint *step_up)
 {
 #if RIMCL_PERIODIC
-    real fl = floor(u);
+    u = (fabs(u) < (real)1e6) ? u : (lreal)((real)0);
+    lreal fl = lreal_floor(u);
     *w = u - fl;
-    int i = (int)fl % n;
-    i += (i < 0) ? n : 0;
-    *upper = (i + 1 == n) ? 0 : i + 1;
+    /* fl modulo n without integer division (vector units have none) */
+    lint i = convert_lint(fl - (real)n * lreal_floor(fl * ((real)1 / (real)n)));
+    i += (i < 0) ? (lint)n : (lint)0;
+    i -= (i >= n) ? (lint)n : (lint)0;
+    *step_up = (i + 1 == n) ? (lint)(1 - n) : (lint)1;
     return i;
 #else
     real top = (real)(n - 1);
-    u = (u < (real)0) ? (real)0 : ((u > top) ? top : u);
-    int i = (int)floor(u);
-    i = (i > n - 2) ? max(n - 2, 0) : i;
-    *w = u - (real)i;
-    *upper = min(i + 1, n - 1);
+    u = (u >= (real)0) ? ((u <= top) ? u : (lreal)top) : (lreal)((real)0);
+    lint i = convert_lint(u);
+    int last = (n > 1) ? n - 2 : 0;
+    i = (i > last) ? (lint)last : i;
+    *w = u - convert_lreal(i);
+    *step_up = (n > 1) ? (lint)1 : (lint)0;
     return i;
 #endif
 }
 
-inline real4 field_sample(FIELD_ARGS, real3 p)
+/* Node index of the lower corner of the cell holding p, and the index steps to the
+ * upper neighbours along x1, x2, x3, for every lane. */
+RIMCL_INLINE lint lanes_cell(FIELD_ARGS, lvec3 p, lreal *w1, lreal *w2, lreal *w3, lint *up1,
+                             lint *up2, lint *up3)
 {
-    real3 u = (p - PARAM3(params, P_ORIGIN_HI, P_ORIGIN_LO)) * PARAM3(params, P_INVH_HI, P_INVH_LO);
-    real w1, w2, w3;
-    int j1, j2, j3;
-    int i1 = cell_of(u.x, counts.x, &w1, &j1);
-    int i2 = cell_of(u.y, counts.y, &w2, &j2);
-    int i3 = cell_of(u.z, counts.z, &w3, &j3);
-    size_t row = (size_t)counts.x;
-    size_t plane = row * (size_t)counts.y;
-    size_t b00 = (size_t)i3 * plane + (size_t)i2 * row;
-    size_t b01 = (size_t)i3 * plane + (size_t)j2 * row;
-    size_t b10 = (size_t)j3 * plane + (size_t)i2 * row;
-    size_t b11 = (size_t)j3 * plane + (size_t)j2 * row;
-    real4 c00 = mix(convert_real4(grid[b00 + i1]), convert_real4(grid[b00 + j1]), w1);
-    real4 c01 = mix(convert_real4(grid[b01 + i1]), convert_real4(grid[b01 + j1]), w1);
-    real4 c10 = mix(convert_real4(grid[b10 + i1]), convert_real4(grid[b10 + j1]), w1);
-    real4 c11 = mix(convert_real4(grid[b11 + i1]), convert_real4(grid[b11 + j1]), w1);
-    real4 c0 = mix(c00, c01, w2);
-    real4 c1 = mix(c10, c11, w2);
-    real4 s = mix(c0, c1, w3);
+    const real3 origin = PARAM3(params, P_ORIGIN_HI, P_ORIGIN_LO);
+    const real3 inv_h = PARAM3(params, P_INVH_HI, P_INVH_LO);
+    lint i1 = lanes_cell_of((p.x - origin.x) * inv_h.x, counts.x, w1, up1);
+    lint i2 = lanes_cell_of((p.y - origin.y) * inv_h.y, counts.y, w2, up2);
+    lint i3 = lanes_cell_of((p.z - origin.z) * inv_h.z, counts.z, w3, up3);
+    const int row = counts.x;
+    const int plane = counts.x * counts.y;
+    *up2 *= row;
+    *up3 *= plane;
+    return i3 * plane + i2 * row + i1;
+}
+
+RIMCL_INLINE real4 lerp4(float4 a, float4 b, real w)
+{
+    real4 low = convert_real4(a);
+    return low + w * (convert_real4(b) - low);
+}
+
+/* Trilinear interpolation of the float4 nodes: the cells and weights of all lanes are
+ * found at once in vector registers, the 8 corner loads and the blend lane by lane.
+ * Lanes not in `active` keep their values in *out (finished rays are frozen). */
+RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample *out)
+{
+    lreal w1, w2, w3;
+    lint up1, up2, up3;
+    lint base = lanes_cell(FIELD_PASS, p, &w1, &w2, &w3, &up1, &up2, &up3);
+    const real n_ref = PARAM(params, P_NREF);
+#pragma unroll
+    for (int k = 0; k < RIMCL_LANES; ++k) {
+        if (LANE_I(active, k)) {
+            __global const float4 *c = grid + LANE_I(base, k);
+            const int d1 = LANE_I(up1, k), d2 = LANE_I(up2, k), d3 = LANE_I(up3, k);
+            const real f1 = LANE(w1, k), f2 = LANE(w2, k), f3 = LANE(w3, k);
+            real4 c00 = lerp4(c[0], c[d1], f1);
+            real4 c01 = lerp4(c[d2], c[d2 + d1], f1);
+            real4 c10 = lerp4(c[d3], c[d3 + d1], f1);
+            real4 c11 = lerp4(c[d3 + d2], c[d3 + d2 + d1], f1);
+            real4 c0 = c00 + f2 * (c01 - c00);
+            real4 s = c0 + f3 * (c10 + f2 * (c11 - c10) - c0);
+            LANE(out->n, k) = n_ref + s.x;
+            LANE(out->g1, k) = s.y;
+            LANE(out->g2, k) = s.z;
+            LANE(out->g3, k) = s.w;
+        }
+    }
+}
+#define RIMCL_LANE_SAMPLER
+
+#if RIMCL_POCL_FAST
+/* Ask the CPU to fetch the cells at the positions p of the active lanes into its cache
+ * (a ray's next cells are known a step ahead: the path bends little over a step). The
+ * field is usually larger than the cache, and one ray per lane leaves the CPU waiting
+ * for memory otherwise (DESIGN §11: 20-30 % lost). */
+RIMCL_INLINE void field_prefetch_lanes(FIELD_ARGS, lvec3 p, lmask active)
+{
+    lreal w1, w2, w3;
+    lint up1, up2, up3;
+    lint base = lanes_cell(FIELD_PASS, p, &w1, &w2, &w3, &up1, &up2, &up3);
+#pragma unroll
+    for (int k = 0; k < RIMCL_LANES; ++k) {
+        if (LANE_I(active, k)) {
+            __global const float4 *c = grid + LANE_I(base, k);
+            const int d2 = LANE_I(up2, k), d3 = LANE_I(up3, k);
+            __builtin_prefetch(c, 0, 3);
+            __builtin_prefetch(c + d2, 0, 3);
+            __builtin_prefetch(c + d3, 0, 3);
+            __builtin_prefetch(c + d2 + d3, 0, 3);
+        }
+    }
+}
+#define RIMCL_FIELD_PREFETCH 1
+#endif
+
+#elif RIMCL_INTERP == RIMCL_INTERP_TEXTURE
+
+/* Node i sits at the centre of texel i, i.e. at texture coordinate i + 0.5. A periodic
+ * grid needs CLK_ADDRESS_REPEAT, which only exists with normalised coordinates. */
+#if RIMCL_PERIODIC
+__constant sampler_t field_sampler =
+    CLK_NORMALIZED_COORDS_TRUE | CLK_ADDRESS_REPEAT | CLK_FILTER_LINEAR;
+#else
+__constant sampler_t field_sampler =
+    CLK_NORMALIZED_COORDS_FALSE | CLK_ADDRESS_CLAMP_TO_EDGE | CLK_FILTER_LINEAR;
+#endif
+
+RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
+{
+    (void)counts;
+    real3 u = grid_coordinates(params, p);
+    float4 at = (float4)((float)u.x, (float)u.y, (float)u.z, 0.0f) + 0.5f;
+#if RIMCL_PERIODIC
+    at /= convert_float4(get_image_dim(grid));
+    at.w = 0.0f;
+#endif
+    real4 s = convert_real4(read_imagef(grid, field_sampler, at));
     s.x += PARAM(params, P_NREF);
     return s;
 }
 
+#elif RIMCL_INTERP == RIMCL_INTERP_BSPLINE3
+
+#include "rimcl_bspline.h"
+
+#else
+#error "unknown RIMCL_INTERP"
+#endif
+
 #else /* closed-form fields */
 
-inline real4 field_sample(FIELD_ARGS, real3 p)
+RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
 {
     (void)grid;
     (void)counts;
@@ -114,5 +242,27 @@ inline real4 field_sample(FIELD_ARGS, real3 p)
 }
 
 #endif /* RIMCL_FIELD */
+
+#ifndef RIMCL_LANE_SAMPLER
+/* Sample the field at the positions of the lanes in `active`, one lane at a time; the
+ * other lanes of *out keep their values (finished rays are frozen). */
+RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample *out)
+{
+#pragma unroll
+    for (int k = 0; k < RIMCL_LANES; ++k) {
+        if (LANE_I(active, k)) {
+            real4 s = field_sample(FIELD_PASS, (real3)(LANE(p.x, k), LANE(p.y, k), LANE(p.z, k)));
+            LANE(out->n, k) = s.x;
+            LANE(out->g1, k) = s.y;
+            LANE(out->g2, k) = s.z;
+            LANE(out->g3, k) = s.w;
+        }
+    }
+}
+#endif
+
+#ifndef RIMCL_FIELD_PREFETCH
+#define RIMCL_FIELD_PREFETCH 0
+#endif
 
 #endif

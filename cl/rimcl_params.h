@@ -17,14 +17,18 @@
 #define P_BOX_HI 15
 #define P_NREF 18       /* reference index n_ref, (hi, lo) */
 #define P_XEND 20       /* exit plane x1 = x_end, (hi, lo) */
-#define P_STEP 22       /* step in t (dt = ds / n), (hi, lo) */
+#define P_STEP 22       /* step in t (dt = ds / n), (hi, lo); the first step if adaptive */
 #define P_ANALYTIC_HI 24 /* 4 parameters of a closed-form field */
 #define P_ANALYTIC_LO 28
-#define P_COUNT 32
+#define P_STEP_MIN 32   /* adaptive steps: smallest step in t, (hi, lo) */
+#define P_STEP_MAX 34   /* adaptive steps: largest step in t, (hi, lo) */
+#define P_TOL 36        /* adaptive steps: allowed r' error per unit arc length, (hi, lo) */
+#define P_DEPTH 38      /* adaptive steps: lever arm of direction errors on r', (hi, lo) */
+#define P_COUNT 40
 
 #define PARAM(p, i) real_from_pair((p)[i], (p)[(i) + 1])
 #define PARAM3(p, hi, lo) \
-    real3_from_pair((float3)((p)[hi], (p)[(hi) + 1], (p)[(hi) + 2]), \
-                    (float3)((p)[lo], (p)[(lo) + 1], (p)[(lo) + 2]))
+    ((real3)(real_from_pair((p)[hi], (p)[lo]), real_from_pair((p)[(hi) + 1], (p)[(lo) + 1]), \
+             real_from_pair((p)[(hi) + 2], (p)[(lo) + 2])))
 
 #endif

@@ -1,13 +1,21 @@
 /*
- * rimcl_real.h -- precision modes of the ray state and double-float arithmetic.
+ * rimcl_real.h -- precision modes, rays-per-work-item lanes, double-float arithmetic.
  *
- * Purpose: lets one Sharma step be written once for the three precision modes.
+ * Purpose: lets one Sharma step be written once for the three precision modes and for
+ * any number of rays per work-item.
  * Required define: RIMCL_PRECISION = RIMCL_F32 (0, plain float32 state),
  *   RIMCL_F32C (1, position R and direction T kept as float32 hi+lo pairs,
  *   "double-float", the default) or RIMCL_F64 (2, double state; needs cl_khr_fp64).
+ * Optional defines:
+ *   RIMCL_LANES      rays advanced together by one work-item, in the lanes of vector
+ *                    types: 1 (default; GPUs), 2, 4, 8 or 16 (CPUs, where one ray per
+ *                    work-item is latency-bound: DESIGN §11).
+ *   RIMCL_POCL_FAST  1 on PoCL: helpers forced inline and the compiler's builtins used
+ *                    in place of OpenCL library calls that PoCL may not inline
+ *                    (floor, fma, clamp); 0 (default) keeps the standard functions.
  * Field samples are float32 in every mode; `real` is the type positions and
- * interpolation weights are computed in (double only in RIMCL_F64).
- * No kernels here. Units: none.
+ * interpolation weights are computed in (double only in RIMCL_F64); `lreal` is a
+ * `real` per lane. No kernels here. Units: none.
  */
 #ifndef RIMCL_REAL_H
 #define RIMCL_REAL_H
@@ -19,27 +27,135 @@
 #ifndef RIMCL_PRECISION
 #error "RIMCL_PRECISION must be defined (0 = f32, 1 = f32c, 2 = f64)"
 #endif
+#ifndef RIMCL_LANES
+#define RIMCL_LANES 1
+#endif
+#ifndef RIMCL_POCL_FAST
+#define RIMCL_POCL_FAST 0
+#endif
 
 /* The compensated sums below rely on every operation being rounded as written. */
 #pragma OPENCL FP_CONTRACT OFF
 
 #if RIMCL_PRECISION == RIMCL_F64
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#define RIMCL_REAL_TYPE double
 typedef double real;
 typedef double3 real3;
 typedef double4 real4;
-#define convert_real3 convert_double3
 #define convert_real4 convert_double4
+#define REAL_EPS DBL_EPSILON
 #else
+#define RIMCL_REAL_TYPE float
 typedef float real;
 typedef float3 real3;
 typedef float4 real4;
-#define convert_real3 convert_float3
 #define convert_real4 convert_float4
+#define REAL_EPS FLT_EPSILON
 #endif
 
+/* ---- PoCL switch: the hot loop without library calls ---- */
+#if RIMCL_POCL_FAST
+#define RIMCL_INLINE inline __attribute__((always_inline))
+#if RIMCL_PRECISION == RIMCL_F64
+#define real_floor(x) __builtin_floor(x)
+#else
+#define real_floor(x) __builtin_floorf(x)
+#endif
+#else
+/* static: NVIDIA's compiler treats a plain C99 `inline` as needing an external
+ * definition and fails with "ptxas fatal: Unresolved extern function". */
+#define RIMCL_INLINE static inline
+#define real_floor(x) floor(x)
+#endif
+
+/* ---- lanes: RIMCL_LANES rays side by side in vector types ---- */
+#define RIMCL_CAT_(a, b) a##b
+#define RIMCL_CAT(a, b) RIMCL_CAT_(a, b)
+
+#if RIMCL_LANES == 1
+typedef real lreal;
+typedef int lint; /* per-lane integers (counters, status) and lane masks */
+#define LANES_ANY(mask) (mask)
+#define LANE(v, k) (v)
+#define LANE_I(v, k) (v)
+#define lreal_floor(x) real_floor(x)
+#define convert_lint(x) ((int)(x))
+#define convert_lreal(x) ((real)(x))
+#elif RIMCL_LANES == 2 || RIMCL_LANES == 4 || RIMCL_LANES == 8 || RIMCL_LANES == 16
+typedef RIMCL_CAT(RIMCL_REAL_TYPE, RIMCL_LANES) lreal;
+/* comparisons of lreal give lint masks (all bits set = true) */
+#if RIMCL_PRECISION == RIMCL_F64
+typedef long lint_scalar;
+typedef RIMCL_CAT(long, RIMCL_LANES) lint;
+#else
+typedef int lint_scalar;
+typedef RIMCL_CAT(int, RIMCL_LANES) lint;
+#endif
+#define LANES_ANY(mask) any(mask)
+#if RIMCL_POCL_FAST
+#define lreal_floor(x) __builtin_elementwise_floor(x)
+#define convert_lint(x) __builtin_convertvector((x), lint)
+#define convert_lreal(x) __builtin_convertvector((x), lreal)
+#elif RIMCL_PRECISION == RIMCL_F64
+#define lreal_floor(x) floor(x)
+#define convert_lint RIMCL_CAT(convert_long, RIMCL_LANES)
+#define convert_lreal RIMCL_CAT(convert_double, RIMCL_LANES)
+#else
+#define lreal_floor(x) floor(x)
+#define convert_lint RIMCL_CAT(convert_int, RIMCL_LANES)
+#define convert_lreal RIMCL_CAT(convert_float, RIMCL_LANES)
+#endif
+/* lane k of a private lreal (LANE) or lint (LANE_I) variable, readable and writable;
+ * clang subscripts vectors in registers, other compilers go through memory */
+#ifdef __clang__
+#define LANE(v, k) ((v)[k])
+#define LANE_I(v, k) ((v)[k])
+#else
+#define LANE(v, k) (((real *)&(v))[k])
+#define LANE_I(v, k) (((lint_scalar *)&(v))[k])
+#endif
+#else
+#error "RIMCL_LANES must be 1, 2, 4, 8 or 16"
+#endif
+/* lane masks are lint: nonzero (scalar) or all bits set (vector) where true */
+typedef lint lmask;
+
+typedef struct {
+    lreal x, y, z;
+} lvec3;
+
+/* ---- double-float (f32c) arithmetic: a value is hi + lo with |lo| <= ulp(hi)/2 ---- */
+
+/* s + e == a + b exactly (Knuth's two-sum, no ordering requirement). */
+RIMCL_INLINE lreal two_sum(lreal a, lreal b, lreal *err)
+{
+    lreal s = a + b;
+    lreal bb = s - a;
+    *err = (a - (s - bb)) + (b - bb);
+    return s;
+}
+
+/* p + e == a * b exactly (needs a correctly rounded fma). */
+RIMCL_INLINE lreal two_prod(lreal a, lreal b, lreal *err)
+{
+    lreal p = a * b;
+    *err = fma(a, b, -p);
+    return p;
+}
+
+/* (hi, lo) += (b_hi, b_lo), renormalised. */
+RIMCL_INLINE void df_add(lreal *hi, lreal *lo, lreal b_hi, lreal b_lo)
+{
+    lreal e;
+    lreal s = two_sum(*hi, b_hi, &e);
+    e += *lo + b_lo;
+    *hi = s + e;
+    *lo = e - (*hi - s);
+}
+
 /* Value of a double-float parameter pair (hi, lo) at the working precision. */
-inline real real_from_pair(float hi, float lo)
+RIMCL_INLINE real real_from_pair(float hi, float lo)
 {
 #if RIMCL_PRECISION == RIMCL_F64
     return (double)hi + (double)lo;
@@ -47,45 +163,6 @@ inline real real_from_pair(float hi, float lo)
     (void)lo;
     return hi;
 #endif
-}
-
-inline real3 real3_from_pair(float3 hi, float3 lo)
-{
-#if RIMCL_PRECISION == RIMCL_F64
-    return convert_double3(hi) + convert_double3(lo);
-#else
-    (void)lo;
-    return hi;
-#endif
-}
-
-/* ---- double-float (f32c) arithmetic: a value is hi + lo with |lo| <= ulp(hi)/2 ---- */
-
-/* s + e == a + b exactly (Knuth's two-sum, no ordering requirement). */
-inline float3 two_sum3(float3 a, float3 b, float3 *err)
-{
-    float3 s = a + b;
-    float3 bb = s - a;
-    *err = (a - (s - bb)) + (b - bb);
-    return s;
-}
-
-/* p + e == a * b exactly (needs a correctly rounded fma). */
-inline float3 two_prod3(float a, float3 b, float3 *err)
-{
-    float3 p = a * b;
-    *err = fma((float3)(a), b, -p);
-    return p;
-}
-
-/* (hi, lo) += (b_hi, b_lo), renormalised. */
-inline void df_add3(float3 *hi, float3 *lo, float3 b_hi, float3 b_lo)
-{
-    float3 e;
-    float3 s = two_sum3(*hi, b_hi, &e);
-    e += *lo + b_lo;
-    *hi = s + e;
-    *lo = e - (*hi - s);
 }
 
 #endif

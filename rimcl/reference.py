@@ -30,7 +30,7 @@ def _cell(u, count, periodic):
     return index, np.minimum(index + 1, count - 1), u - index
 
 
-def sample_field(field, points):
+def sample_field(field, points, interp="trilinear"):
     """``n`` and ``∇n`` at ``points`` in float64.
 
     Parameters
@@ -38,6 +38,9 @@ def sample_field(field, points):
     field : Field or AnalyticField
     points : ndarray, shape (M, 3)
         Positions ``(x1, x2, x3)``.
+    interp : {"trilinear", "texture", "bspline3"}
+        ``texture`` is trilinear interpolation done by the device's image hardware; its
+        exact value is the ``trilinear`` one.
 
     Returns
     -------
@@ -47,6 +50,8 @@ def sample_field(field, points):
     points = np.asarray(points, dtype=np.float64)
     if isinstance(field, AnalyticField):
         return field.refractive_index(points), field.index_gradient(points)
+    if interp == "bspline3":
+        return _sample_bspline3(field, points)
     u = (points - field.origin) / field.spacing
     data = field.packed.astype(np.float64)
     n1, n2, n3 = field.counts
@@ -65,13 +70,53 @@ def sample_field(field, points):
     return field.n_ref + value[:, 0], value[:, 1:]
 
 
-def _step(field, r, t, d_a, h):
+def _bspline_taps(u, count, periodic):
+    """Array indices (4, M) of the taps around coordinate u (cells) and the fraction."""
+    if periodic:
+        lower = np.floor(u)
+        cell = lower.astype(np.int64)
+        taps = np.mod(cell[None, :] + np.arange(-1, 3)[:, None], count)
+        return taps, u - lower
+    u = np.clip(u, 0.0, count - 1.0)
+    cell = np.minimum(np.floor(u).astype(np.int64), max(count - 2, 0))
+    # node i - 1 + k is stored at index i + k (rimcl.bspline)
+    return cell[None, :] + np.arange(4)[:, None], u - cell
+
+
+def _sample_bspline3(field, points):
+    from rimcl.bspline import bspline_weights
+    from rimcl.trace import bspline_coefficients
+
+    coefficients = bspline_coefficients(field).astype(np.float64)
+    u = (points - field.origin) / field.spacing
+    taps, weights, slopes = [], [], []
+    for axis in range(3):
+        axis_taps, fraction = _bspline_taps(u[:, axis], field.counts[axis], field.periodic)
+        w, dw = bspline_weights(fraction)
+        taps.append(axis_taps)
+        weights.append(w)
+        slopes.append(dw)
+    value = np.zeros(len(points))
+    grad = np.zeros((len(points), 3))
+    for c in range(4):
+        for b in range(4):
+            for a in range(4):
+                coef = coefficients[taps[2][c], taps[1][b], taps[0][a]]
+                wx, wy, wz = weights[0][a], weights[1][b], weights[2][c]
+                value += wx * wy * wz * coef
+                grad[:, 0] += slopes[0][a] * wy * wz * coef
+                grad[:, 1] += wx * slopes[1][b] * wz * coef
+                grad[:, 2] += wx * wy * slopes[2][c] * coef
+    return field.n_ref + value, grad / field.spacing
+
+
+def _step(field, r, t, d_a, h, interp):
     """One Sharma step for rows of (r, t) with per-row step h; returns samples too."""
     h = h[:, None]
     a = h * d_a
-    n_b, g_b = sample_field(field, r + 0.5 * h * t + 0.125 * h * a)
+    n_b, g_b = sample_field(field, r + 0.5 * h * t + 0.125 * h * a, interp)
     b = h * n_b[:, None] * g_b
-    n_c, g_c = sample_field(field, r + h * t + 0.5 * h * b)
+    n_c, g_c = sample_field(field, r + h * t + 0.5 * h * b, interp)
     c = h * n_c[:, None] * g_c
     r_new = r + h * (t + (a + 2 * b) / 6)
     t_new = t + (a + 4 * b + c) / 6
@@ -83,11 +128,15 @@ def _perpendicular(grad, t):
     return grad - np.sum(grad * unit, axis=1, keepdims=True) * unit
 
 
-def trace_rays_reference(field, origins, directions, *, x_end, step=None, max_steps=None):
-    """Float64 NumPy twin of :func:`rimcl.trace_rays` (same inputs, same result type).
+def trace_rays_reference(
+    field, origins, directions, *, x_end, step=None, max_steps=None, interp="trilinear"
+):
+    """Float64 NumPy twin of :func:`rimcl.trace_rays` with a fixed step (same inputs,
+    same result type).
 
     Origins, directions and parameters are rounded to the (hi, lo) float32 pairs the
-    kernel receives, so both see the same inputs.
+    kernel receives, so both see the same inputs. ``interp`` is ``trilinear``,
+    ``texture`` (the same as trilinear) or ``bspline3``.
     """
     origins, directions = _validate_rays(origins, directions)
     origins = np.sum(split_pairs(origins), axis=0, dtype=np.float64)
@@ -102,7 +151,7 @@ def trace_rays_reference(field, origins, directions, *, x_end, step=None, max_st
 
     count = origins.shape[0]
     r = origins.copy()
-    n_a, g_a = sample_field(field, r)
+    n_a, g_a = sample_field(field, r, interp)
     t = n_a[:, None] * directions
     offset = r[:, 0] - x_end
     on_plane = offset == 0
@@ -123,7 +172,7 @@ def trace_rays_reference(field, origins, directions, *, x_end, step=None, max_st
         ra, ta, na, ga = r[active], t[active], n_a[active], g_a[active]
         d_a = na[:, None] * ga
         h = np.full(active.size, step)
-        r_new, t_new, sb, sc = _step(field, ra, ta, d_a, h)
+        r_new, t_new, sb, sc = _step(field, ra, ta, d_a, h, interp)
         steps[active] += 1
         new_offset = r_new[:, 0] - x_end
         finite = np.all(np.isfinite(r_new), axis=1) & np.all(np.isfinite(t_new), axis=1)
@@ -137,7 +186,7 @@ def trace_rays_reference(field, origins, directions, *, x_end, step=None, max_st
                 if not todo.size:
                     break
                 sel = rows[todo]
-                rk, tk, sbk, sck = _step(field, ra[sel], ta[sel], d_a[sel], hk[todo])
+                rk, tk, sbk, sck = _step(field, ra[sel], ta[sel], d_a[sel], hk[todo], interp)
                 r_new[sel], t_new[sel] = rk, tk
                 sb[0][sel], sb[1][sel], sc[0][sel], sc[1][sel] = sbk[0], sbk[1], sck[0], sck[1]
                 h[sel] = hk[todo]
@@ -166,14 +215,20 @@ def trace_rays_reference(field, origins, directions, *, x_end, step=None, max_st
         running &= ~turned
         active = active[running]
         if active.size:
-            n_a[active], g_a[active] = sample_field(field, r[active])
+            n_a[active], g_a[active] = sample_field(field, r[active], interp)
 
     raw = np.zeros((count, 17), dtype=np.float32)
     raw[:, 0:3], raw[:, 3:6] = split_pairs(r)
     raw[:, 6:9], raw[:, 9:12] = split_pairs(t)
     raw[:, 12], raw[:, 13], raw[:, 14:17] = path, optical, nperp
     info = np.column_stack([steps, status]).astype(np.int32)
-    config = {"x_end": x_end, "step": step, "precision": "numpy-f64", "max_steps": max_steps}
+    config = {
+        "x_end": x_end,
+        "step": step,
+        "interp": interp,
+        "precision": "numpy-f64",
+        "max_steps": max_steps,
+    }
     result = _finish(origins, directions, raw, info, step, config)
     # keep the float64 path integrals unrounded
     result.path_length, result.optical_path = path, optical

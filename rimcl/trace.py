@@ -4,9 +4,20 @@ The OpenCL kernel (``cl/trace.cl``) integrates Fermat's equation with Sharma's
 Runge–Kutta–Nyström scheme and stops each ray exactly on the plane ``x1 = x_end``;
 this module prepares the inputs, runs the kernel in batches of bounded memory and turns
 the exit states into float64 results (back-projection, deflection, path integrals).
+
+Choices a call makes (DESIGN §4):
+
+- ``interp``: ``trilinear`` (software, float4 nodes ``δn, ∇n``), ``texture`` (the same
+  nodes in an OpenCL image read with the hardware linear filter), ``bspline3`` (cubic
+  B-spline of ``δn``, gradient from the same spline), or ``auto`` (calibrated).
+- ``precision``: ``f32``, ``f32c`` (double-float accumulation, the default), ``f64``.
+- ``step``: a fixed step in ``t``; None for half a cell of arc; ``"adaptive"`` for step
+  doubling to ``tolerance``; ``"auto"`` for the largest fixed step that meets
+  ``tolerance`` on a calibration subset (:mod:`rimcl.calibrate`).
 """
 
 import dataclasses
+import logging
 import math
 
 import numpy as np
@@ -14,11 +25,28 @@ import numpy as np
 from rimcl.errors import RimclError
 from rimcl.field import AnalyticField, Field
 
+logger = logging.getLogger(__name__)
+
 STATUS_NAMES = ("ok", "exit_side", "turned_back", "max_steps", "non_finite")
 PRECISIONS = ("f32", "f32c", "f64")
-INTERPOLATIONS = ("trilinear",)
+INTERPOLATIONS = ("trilinear", "texture", "bspline3")
+#: What ``interp=`` accepts: an interpolation, or ``auto`` (calibrated per call).
+INTERP_CHOICES = (*INTERPOLATIONS, "auto")
+#: What ``step=`` accepts besides a number and None.
+STEP_KEYWORDS = ("adaptive", "auto")
+
+#: Pixels across the field of view of the paper's camera; default tolerances are 0.01 of
+#: such a pixel (:func:`default_tolerance`).
+PAPER_PIXELS = 8192
+#: Adaptive steps stay within [ADAPTIVE_STEP_RANGE[0], ADAPTIVE_STEP_RANGE[1]] times the
+#: default step (1/512 of a cell to 8 cells of arc on a grid).
+ADAPTIVE_STEP_RANGE = (1 / 256, 16.0)
+#: A fixed step longer than this many cells of arc is flagged (features narrower than
+#: the step are skipped); it is used, not refused, since smooth fields allow it.
+LONG_STEP_CELLS = 2.0
 
 _PRECISION_DEFINE = {"f32": 0, "f32c": 1, "f64": 2}
+_INTERP_DEFINE = {"trilinear": 0, "texture": 1, "bspline3": 2}
 _ANALYTIC_DEFINE = {"uniform": 1, "grin": 2, "fisheye": 3, "linear": 4}
 _ANALYTIC_PARAM_ORDER = {
     "uniform": ("n0",),
@@ -30,8 +58,9 @@ _ANALYTIC_PARAM_ORDER = {
 # offsets of the float parameter block, as in cl/rimcl_params.h
 _P_ORIGIN_HI, _P_ORIGIN_LO, _P_INVH_HI, _P_INVH_LO = 0, 3, 6, 9
 _P_BOX_LO, _P_BOX_HI, _P_NREF, _P_XEND, _P_STEP = 12, 15, 18, 20, 22
-_P_ANALYTIC_HI, _P_ANALYTIC_LO, _P_COUNT = 24, 28, 32
-_RAY_IN_STRIDE, _RAY_OUT_STRIDE = 12, 17
+_P_ANALYTIC_HI, _P_ANALYTIC_LO = 24, 28
+_P_STEP_MIN, _P_STEP_MAX, _P_TOL, _P_DEPTH, _P_COUNT = 32, 34, 36, 38, 40
+_RAY_IN_STRIDE, _RAY_OUT_STRIDE, _RAY_INFO_STRIDE = 12, 17, 4
 
 DEFAULT_BATCH = 1 << 18
 
@@ -168,7 +197,110 @@ def _validate_rays(origins, directions):
     return origins, directions / norms[:, None]
 
 
-def _check_step(field, step, x_end, origins):
+def default_tolerance(field, origins, x_end):
+    """Default r' tolerance of ``step="adaptive"`` and ``auto``: 0.01 pixel of the paper's
+    camera, whose :data:`PAPER_PIXELS` pixels span the field's widest transverse extent
+    (for closed-form fields: the depth ``max |x_end - x1_0|``, or 1 length unit).
+
+    Returns
+    -------
+    float
+        Length units.
+    """
+    if isinstance(field, Field):
+        span = float(np.max((field.grid_hi - field.grid_lo)[1:]))
+    else:
+        span = float(np.max(np.abs(x_end - origins[:, 0]))) or 1.0
+    return 0.01 * span / PAPER_PIXELS
+
+
+@dataclasses.dataclass(frozen=True)
+class KernelShape:
+    """How the kernel is built for a device (DESIGN §11).
+
+    Attributes
+    ----------
+    lanes : int
+        Rays advanced together by one work-item, in vector lanes (1, 2, 4, 8 or 16).
+    pocl_fast : bool
+        Force helpers inline and keep OpenCL library calls out of the hot loop (PoCL).
+    """
+
+    lanes: int = 1
+    pocl_fast: bool = False
+
+    def __post_init__(self):
+        if self.lanes not in (1, 2, 4, 8, 16):
+            raise RimclError(f"rays per work-item must be 1, 2, 4, 8 or 16, got {self.lanes}")
+
+
+#: Rays per work-item on CPUs: 8 lanes (float8: one AVX register in f32/f32c).
+CPU_LANES = 8
+
+
+def default_kernel_shape(device):
+    """8 lanes and the PoCL switch on CPUs; one ray per work-item elsewhere (GPUs).
+
+    Parameters
+    ----------
+    device : pyopencl.Device
+
+    Returns
+    -------
+    KernelShape
+    """
+    import pyopencl as cl
+
+    from rimcl.device import is_pocl
+
+    if device.type & cl.device_type.CPU:
+        return KernelShape(lanes=CPU_LANES, pocl_fast=is_pocl(device))
+    return KernelShape(lanes=1, pocl_fast=False)
+
+
+@dataclasses.dataclass(frozen=True)
+class StepPlan:
+    """The integration step of one kernel run.
+
+    Attributes
+    ----------
+    step : float
+        The fixed step in ``t``, or the first step if adaptive.
+    adaptive : bool
+    tolerance : float or None
+        Adaptive: allowed r' error (length units).
+    step_min, step_max : float or None
+        Adaptive: bounds of the step in ``t``.
+    lever : float or None
+        Adaptive: lever arm of direction errors on r' (length units).
+    """
+
+    step: float
+    adaptive: bool = False
+    tolerance: float | None = None
+    step_min: float | None = None
+    step_max: float | None = None
+    lever: float | None = None
+
+    def describe(self):
+        if not self.adaptive:
+            return {"step_control": "fixed", "step": self.step}
+        return {
+            "step_control": "adaptive",
+            "first_step": self.step,
+            "tolerance": self.tolerance,
+            "step_min": self.step_min,
+            "step_max": self.step_max,
+        }
+
+
+def _round_to_pairs(value):
+    """``value`` as the kernel sees it: the sum of its float32 (hi, lo) pair."""
+    hi, lo = split_pairs([value])
+    return float(join_pairs(hi, lo)[0])
+
+
+def _check_step(field, step, x_end, origins, precision="f32c"):
     if not (step > 0 and math.isfinite(step)):
         raise RimclError(f"the step must be a positive number, got {step}")
     depth = float(np.max(np.abs(x_end - origins[:, 0])))
@@ -179,8 +311,33 @@ def _check_step(field, step, x_end, origins):
                 f"step {step:g} (arc {step * field.n_ref:g}) is larger than the field "
                 f"({extent:g} across)"
             )
+        cells = step * field.n_ref / float(np.min(field.spacing))
+        if cells < 1e-6:
+            raise RimclError(
+                f"step {step:g} is {cells:.1e} of a cell: more than a million steps per cell"
+            )
     elif depth > 0 and step * field.n_ref > depth:
         raise RimclError(f"step {step:g} is larger than the distance to the exit plane")
+    if precision == "f32":
+        reach = float(np.max(np.abs(np.concatenate([origins.ravel(), [x_end]]))))
+        if step * field.n_ref < 4 * np.finfo(np.float32).eps * reach:
+            raise RimclError(
+                f"step {step:g} is below the float32 resolution of positions near {reach:g}: "
+                "plain f32 would not move the rays; use f32c or f64"
+            )
+
+
+def _long_step_warning(field, step):
+    """A note when a fixed step spans more than LONG_STEP_CELLS cells of arc, else None."""
+    if not isinstance(field, Field):
+        return None
+    cells = step * field.n_ref / float(np.min(field.spacing))
+    if cells <= LONG_STEP_CELLS:
+        return None
+    return (
+        f"the step spans {cells:.1f} cells of arc: features narrower than the step are "
+        "skipped; check with a smaller step, step='adaptive' or step='auto'"
+    )
 
 
 def _default_max_steps(field, step, x_end, origins, directions):
@@ -194,7 +351,46 @@ def _default_max_steps(field, step, x_end, origins, directions):
     return int(min(4 * span / (step * n_min) + 64, 2**31 - 1))
 
 
-def _param_block(field, x_end, step):
+def plan_steps(field, step, x_end, origins, precision="f32c", tolerance=None):
+    """Resolve ``step=`` (a number, None or ``"adaptive"``) into a :class:`StepPlan`.
+
+    Parameters
+    ----------
+    field : Field or AnalyticField
+    step : float, None or "adaptive"
+    x_end : float
+    origins : ndarray, shape (N, 3)
+    precision : str
+    tolerance : float, optional
+        Adaptive: allowed r' error (length units); default :func:`default_tolerance`.
+
+    Returns
+    -------
+    StepPlan
+    """
+    if step == "adaptive":
+        tolerance = default_tolerance(field, origins, x_end) if tolerance is None else tolerance
+        tolerance = float(tolerance)
+        if not (tolerance > 0 and math.isfinite(tolerance)):
+            raise RimclError(f"the tolerance must be a positive length, got {tolerance}")
+        first = default_step(field)
+        lever = float(np.max(np.abs(x_end - origins[:, 0]))) or 1.0
+        return StepPlan(
+            step=_round_to_pairs(first),
+            adaptive=True,
+            tolerance=tolerance,
+            step_min=_round_to_pairs(first * ADAPTIVE_STEP_RANGE[0]),
+            step_max=_round_to_pairs(first * ADAPTIVE_STEP_RANGE[1]),
+            lever=lever,
+        )
+    if isinstance(step, str):
+        raise RimclError(f"step must be a number, None, 'adaptive' or 'auto', got {step!r}")
+    step = default_step(field) if step is None else float(step)
+    _check_step(field, step, x_end, origins, precision)
+    return StepPlan(step=_round_to_pairs(step))
+
+
+def _param_block(field, x_end, plan):
     params = np.zeros(_P_COUNT, dtype=np.float32)
 
     def put(offset, values):
@@ -218,38 +414,109 @@ def _param_block(field, x_end, step):
         params[_P_BOX_HI : _P_BOX_HI + 3] = np.asarray(field.box_hi, dtype=np.float32)
     put_pair(_P_NREF, field.n_ref)
     put_pair(_P_XEND, x_end)
-    put_pair(_P_STEP, step)
+    put_pair(_P_STEP, plan.step)
+    if plan.adaptive:
+        put_pair(_P_STEP_MIN, plan.step_min)
+        put_pair(_P_STEP_MAX, plan.step_max)
+        put_pair(_P_TOL, plan.tolerance / plan.lever)
+        put_pair(_P_DEPTH, plan.lever)
     return params
 
 
-def kernel_defines(field, precision):
-    """``-D`` defines selecting the field kind, boundary and precision of ``trace.cl``."""
+def kernel_defines(field, precision, interp="trilinear", adaptive=False, shape=None):
+    """``-D`` defines of ``trace.cl``: field kind, interpolation, boundary, precision,
+    step control and kernel shape.
+
+    Parameters
+    ----------
+    field : Field or AnalyticField
+    precision : {"f32", "f32c", "f64"}
+    interp : {"trilinear", "texture", "bspline3"}
+        Ignored for closed-form fields.
+    adaptive : bool
+    shape : KernelShape, optional
+        Default: one ray per work-item, standard functions.
+
+    Returns
+    -------
+    dict of str to int
+    """
     if precision not in PRECISIONS:
         raise RimclError(f"precision must be one of {PRECISIONS}, got {precision!r}")
+    if interp not in INTERPOLATIONS:
+        raise RimclError(f"interp must be one of {INTERPOLATIONS}, got {interp!r}")
+    shape = KernelShape() if shape is None else shape
     if isinstance(field, Field):
-        kind, periodic = 0, int(field.periodic)
+        kind, periodic, interp_define = 0, int(field.periodic), _INTERP_DEFINE[interp]
     elif isinstance(field, AnalyticField):
-        kind, periodic = _ANALYTIC_DEFINE[field.kind], 0
+        kind, periodic, interp_define = _ANALYTIC_DEFINE[field.kind], 0, 0
     else:
         raise RimclError(f"cannot trace through a {type(field).__name__}")
     return {
         "RIMCL_PRECISION": _PRECISION_DEFINE[precision],
         "RIMCL_FIELD": kind,
+        "RIMCL_INTERP": interp_define,
         "RIMCL_PERIODIC": periodic,
+        "RIMCL_ADAPTIVE": int(adaptive),
+        "RIMCL_LANES": shape.lanes,
+        "RIMCL_POCL_FAST": int(shape.pocl_fast),
     }
 
 
-def _field_buffer(field, context):
+def _texture_image(field, context, device):
     import pyopencl as cl
 
-    if isinstance(field, Field):
-        return field.cached(
-            ("trilinear", context),
-            lambda: cl.Buffer(
-                context, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=field.packed
-            ),
+    if not device.image_support:
+        raise RimclError(
+            f"interp 'texture' needs OpenCL image support, which {device.name.strip()} lacks; "
+            "use 'trilinear' (the same interpolation in software)"
         )
-    return cl.Buffer(context, cl.mem_flags.READ_ONLY, size=16)
+    nodes = field.packed
+    if nodes.shape[0] == 1:
+        # a 3-D image needs a depth of at least 2: repeat the single x3 layer
+        nodes = np.concatenate([nodes, nodes], axis=0)
+    n3, n2, n1 = nodes.shape[:3]
+    limits = (device.image3d_max_width, device.image3d_max_height, device.image3d_max_depth)
+    if n1 > limits[0] or n2 > limits[1] or n3 > limits[2]:
+        raise RimclError(
+            f"the field ({n1} x {n2} x {n3} nodes) exceeds the largest 3-D image of "
+            f"{device.name.strip()} ({limits[0]} x {limits[1]} x {limits[2]}); use 'trilinear'"
+        )
+    image_format = cl.ImageFormat(cl.channel_order.RGBA, cl.channel_type.FLOAT)
+    return cl.Image(
+        context,
+        cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+        image_format,
+        shape=(n1, n2, n3),
+        hostbuf=np.ascontiguousarray(nodes),
+    )
+
+
+def bspline_coefficients(field):
+    """The field's cubic B-spline coefficients (:func:`rimcl.bspline.bspline_coefficients`),
+    computed once per field."""
+    from rimcl.bspline import bspline_coefficients as prefilter
+
+    return field.cached("bspline3", lambda: prefilter(field.delta_n, field.periodic))
+
+
+def _field_buffer(field, context, device=None, interp="trilinear"):
+    """The device copy of the field for ``interp``, uploaded once per field and context."""
+    import pyopencl as cl
+
+    flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+    if not isinstance(field, Field):
+        return cl.Buffer(context, cl.mem_flags.READ_ONLY, size=16)
+    if interp == "texture":
+        return field.cached(("texture", context), lambda: _texture_image(field, context, device))
+    if interp == "bspline3":
+        coefficients = bspline_coefficients(field)
+        return field.cached(
+            ("bspline3", context), lambda: cl.Buffer(context, flags, hostbuf=coefficients)
+        )
+    return field.cached(
+        ("trilinear", context), lambda: cl.Buffer(context, flags, hostbuf=field.packed)
+    )
 
 
 def trace_rays(
@@ -265,6 +532,8 @@ def trace_rays(
     max_steps=None,
     batch_size=DEFAULT_BATCH,
     progress=False,
+    tolerance=None,
+    kernel_shape=None,
 ):
     """Trace rays from ``origins`` along ``directions`` to the plane ``x1 = x_end``.
 
@@ -279,11 +548,20 @@ def trace_rays(
     x_end : float
         The exit plane ``x1 = x_end``; it may be crossed in either direction, and a ray
         starting on it may come back to it.
-    step : float, optional
-        The paper's Δζ, a step in ``t`` (``dt = ds/n``, so ``n·step`` of arc). Default:
-        half a cell of arc (:func:`default_step`).
-    interp : {"trilinear"}
-        Interpolation of gridded fields.
+    step : float, None, "adaptive" or "auto"
+        A number: the paper's Δζ, a fixed step in ``t`` (``dt = ds/n``, so ``n·step`` of
+        arc). None: half a cell of arc (:func:`default_step`). ``"adaptive"``: step
+        doubling, each step sized so that the estimated r' error stays within
+        ``tolerance`` over the path (``TraceResult.steps`` counts the accepted steps).
+        ``"auto"``: the largest fixed step whose r' error, calibrated on a subset of the
+        rays against a 4 times smaller step, is within ``tolerance``
+        (:mod:`rimcl.calibrate`).
+    interp : {"trilinear", "texture", "bspline3", "auto"}
+        Interpolation of gridded fields (ignored for closed forms): ``trilinear`` nodes
+        ``δn, ∇n``; ``texture``, the same nodes filtered by the device's image hardware
+        (needs image support); ``bspline3``, a cubic B-spline of ``δn`` and its exact
+        gradient; ``auto``, the cheapest whose calibrated r' error is within
+        ``tolerance``.
     precision : {"f32", "f32c", "f64"}
         Accumulation of position and direction: plain float32, double-float (default),
         or float64 (needs ``cl_khr_fp64``). Field samples are float32 in every mode.
@@ -295,6 +573,94 @@ def trace_rays(
         Rays per kernel launch; bounds the memory used.
     progress : bool
         Show a progress bar over batches.
+    tolerance : float, optional
+        For ``step="adaptive"`` and ``auto``: the allowed error of the image points r'
+        (length units; convert from pixels with the camera's pixel size). Default:
+        :func:`default_tolerance`, 0.01 pixel of the paper's camera.
+    kernel_shape : KernelShape, optional
+        Rays per work-item and the PoCL switch; default :func:`default_kernel_shape`.
+        For benchmarks; results do not depend on it.
+
+    Returns
+    -------
+    TraceResult
+        ``config`` records the settings used, and for ``auto`` the calibration
+        (``config["auto"]``: the choice, its estimated error and every candidate).
+    """
+    from rimcl.device import select_device
+
+    if interp not in INTERP_CHOICES:
+        raise RimclError(f"interp must be one of {INTERP_CHOICES}, got {interp!r}")
+    if isinstance(step, str) and step not in STEP_KEYWORDS:
+        raise RimclError(f"step must be a number, None, 'adaptive' or 'auto', got {step!r}")
+    origins, directions = _validate_rays(origins, directions)
+    x_end = float(x_end)
+    device = select_device(device)
+    calibration = None
+    if interp == "auto" or step == "auto":
+        from rimcl.calibrate import calibrate
+
+        calibration = calibrate(
+            field,
+            origins,
+            directions,
+            x_end=x_end,
+            interp=interp,
+            step=step,
+            precision=precision,
+            device=device,
+            tolerance=tolerance,
+            kernel_shape=kernel_shape,
+        )
+        interp, step = calibration["interp"], calibration["step"]
+    result = run_trace(
+        field,
+        origins,
+        directions,
+        x_end=x_end,
+        plan=plan_steps(field, step, x_end, origins, precision, tolerance),
+        interp=interp,
+        precision=precision,
+        device=device,
+        max_steps=max_steps,
+        batch_size=batch_size,
+        progress=progress,
+        kernel_shape=kernel_shape,
+    )
+    if calibration is not None:
+        result.config["auto"] = calibration
+    return result
+
+
+def run_trace(
+    field,
+    origins,
+    directions,
+    *,
+    x_end,
+    plan,
+    interp,
+    precision,
+    device,
+    max_steps=None,
+    batch_size=DEFAULT_BATCH,
+    progress=False,
+    kernel_shape=None,
+):
+    """Run the trace kernel with settings already resolved (no ``auto``).
+
+    Parameters
+    ----------
+    field : Field or AnalyticField
+    origins, directions : ndarray, float64, shape (N, 3)
+        Validated rays (unit directions).
+    x_end : float
+    plan : StepPlan
+    interp : {"trilinear", "texture", "bspline3"}
+    precision : {"f32", "f32c", "f64"}
+    device : pyopencl.Device
+    max_steps, batch_size, progress, kernel_shape
+        As :func:`trace_rays`.
 
     Returns
     -------
@@ -302,45 +668,40 @@ def trace_rays(
     """
     import pyopencl as cl
 
-    from rimcl.device import context_for, has_fp64, queue_for, select_device
+    from rimcl.device import context_for, has_fp64, queue_for
     from rimcl.program import build_program, get_kernel
 
-    if interp not in INTERPOLATIONS:
-        raise RimclError(f"interp must be one of {INTERPOLATIONS}, got {interp!r}")
-    origins, directions = _validate_rays(origins, directions)
-    x_end = float(x_end)
-    step = default_step(field) if step is None else float(step)
-    _check_step(field, step, x_end, origins)
-    step = float(np.float64(np.float32(step)) + np.float32(step - np.float32(step)))
-    if max_steps is None:
-        max_steps = _default_max_steps(field, step, x_end, origins, directions)
-    device = select_device(device)
     if precision == "f64" and not has_fp64(device):
         raise RimclError(f"precision f64 needs cl_khr_fp64, which {device.name.strip()} lacks")
+    shape = default_kernel_shape(device) if kernel_shape is None else kernel_shape
+    defines = kernel_defines(field, precision, interp, plan.adaptive, shape)
+    if max_steps is None:
+        smallest = plan.step_min if plan.adaptive else plan.step
+        max_steps = _default_max_steps(field, smallest, x_end, origins, directions)
     context, queue = context_for(device), queue_for(device)
-    program = build_program(context, "trace.cl", kernel_defines(field, precision))
+    program = build_program(context, "trace.cl", defines)
     kernel = get_kernel(program, "trace_rays")
-    field_buffer = _field_buffer(field, context)
+    field_buffer = _field_buffer(field, context, device, interp)
     counts = (
         np.array([*field.counts, 0], dtype=np.int32)
         if isinstance(field, Field)
-        else (np.zeros(4, dtype=np.int32))
+        else np.zeros(4, dtype=np.int32)
     )
     params = cl.Buffer(
         context,
         cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-        hostbuf=_param_block(field, x_end, step),
+        hostbuf=_param_block(field, x_end, plan),
     )
 
     count = origins.shape[0]
     raw_out = np.empty((count, _RAY_OUT_STRIDE), dtype=np.float32)
-    info = np.empty((count, 2), dtype=np.int32)
+    info = np.empty((count, _RAY_INFO_STRIDE), dtype=np.int32)
     batch_size = max(1, min(int(batch_size), count))
     rays_in_buf = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=batch_size * _RAY_IN_STRIDE * 4)
     rays_out_buf = cl.Buffer(
         context, cl.mem_flags.WRITE_ONLY, size=batch_size * _RAY_OUT_STRIDE * 4
     )
-    info_buf = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, size=batch_size * 8)
+    info_buf = cl.Buffer(context, cl.mem_flags.WRITE_ONLY, size=batch_size * _RAY_INFO_STRIDE * 4)
 
     bar = None
     if progress:
@@ -364,7 +725,8 @@ def trace_rays(
                 np.int32(max_steps),
                 np.int32(stop - start),
             )
-            cl.enqueue_nd_range_kernel(queue, kernel, (stop - start,), None)
+            work_items = -(-(stop - start) // shape.lanes)
+            cl.enqueue_nd_range_kernel(queue, kernel, (work_items,), None)
             cl.enqueue_copy(queue, raw_out[start:stop], rays_out_buf)
             cl.enqueue_copy(queue, info[start:stop], info_buf)
             queue.finish()
@@ -376,13 +738,29 @@ def trace_rays(
 
     config = {
         "x_end": x_end,
-        "step": step,
-        "interp": interp,
+        "step": plan.step,
+        **plan.describe(),
+        "interp": interp if isinstance(field, Field) else "analytic",
         "precision": precision,
         "max_steps": int(max_steps),
+        "rays_per_work_item": shape.lanes,
         "field": field.describe(),
+        "sharma_steps": int(info[:, 3].sum(dtype=np.int64)),
     }
-    return _finish(origins, directions, raw_out, info, step, config)
+    if plan.adaptive:
+        config["rejected_steps"] = int(info[:, 2].sum(dtype=np.int64))
+    else:
+        warning = _long_step_warning(field, plan.step)
+        if warning is not None:
+            config["warnings"] = [warning]
+            logger.warning(warning)
+    result = _finish(origins, directions, raw_out, info, plan.step, config)
+    if plan.adaptive:
+        ok = result.ok
+        steps = int(result.steps[ok].sum())
+        travel = float(np.sum(result.path_length[ok])) / field.n_ref
+        config["mean_step"] = travel / steps if steps else None
+    return result
 
 
 def _finish(origins, directions, raw_out, info, step, config):
