@@ -14,6 +14,19 @@ device_option = click.option(
     help="OpenCL device: 'pocl', 'nvidia', 'P:D' from 'rimcl devices' "
     "(default: $RIMCL_DEVICE, then a GPU, then a CPU).",
 )
+field_option = click.option(
+    "--field",
+    "field_path",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="rimcl field file (default: the shipped sample).",
+)
+case_option = click.option(
+    "--case", default=None, help="Gladstone–Dale case C0..C4 (default C1, air)."
+)
+k_rho_option = click.option(
+    "--k-rho", type=float, default=None, help="Custom Gladstone–Dale product G = Kρ."
+)
 seed_option = click.option(
     "--seed", type=int, default=0, show_default=True, help="Random seed (tracers, rays)."
 )
@@ -55,6 +68,11 @@ def parse_step(value):
     if not step > 0:
         raise click.BadParameter("the step must be positive", param_hint="--step")
     return step
+
+
+def case_or_default(case, k_rho):
+    """The case to use when neither ``--case`` nor ``--k-rho`` is given: C1 (air)."""
+    return "C1" if case is None and k_rho is None else case
 
 
 def handle_errors(func):

@@ -4,9 +4,13 @@ import click
 import numpy as np
 
 from rimcl.cli.options import (
+    case_option,
+    case_or_default,
     device_option,
+    field_option,
     handle_errors,
     interp_option,
+    k_rho_option,
     overwrite_option,
     parse_step,
     precision_option,
@@ -16,15 +20,9 @@ from rimcl.cli.options import (
 
 
 @click.command()
-@click.option(
-    "--field",
-    "field_path",
-    type=click.Path(dir_okay=False),
-    default=None,
-    help="rimcl field file with velocity (default: the shipped sample).",
-)
-@click.option("--case", default=None, help="Gladstone–Dale case C0..C4 (default C1, air).")
-@click.option("--k-rho", type=float, default=None, help="Custom Gladstone–Dale product G = Kρ.")
+@field_option
+@case_option
+@k_rho_option
 @click.option("--tracers", default=1000, show_default=True, help="Tracers in the sheet.")
 @click.option(
     "--camera",
@@ -170,8 +168,7 @@ def render(
     check_output(output, overwrite)
     if frame_image is not None:
         check_frame_image(frame_image, overwrite)
-    if case is None and k_rho is None:
-        case = "C1"
+    case = case_or_default(case, k_rho)
     result = run_render(
         field_path,
         case=case,

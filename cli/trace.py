@@ -6,9 +6,13 @@ import click
 import numpy as np
 
 from rimcl.cli.options import (
+    case_option,
+    case_or_default,
     device_option,
+    field_option,
     handle_errors,
     interp_option,
+    k_rho_option,
     overwrite_option,
     parse_step,
     precision_option,
@@ -20,16 +24,10 @@ ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
 
 
 @click.command()
-@click.option(
-    "--field",
-    "field_path",
-    type=click.Path(dir_okay=False),
-    default=None,
-    help="rimcl field file (default: the shipped sample).",
-)
+@field_option
 @click.option("--frame", default=0, show_default=True, help="Frame of the field file.")
-@click.option("--case", default=None, help="Gladstone–Dale case C0..C4 (default C1, air).")
-@click.option("--k-rho", type=float, default=None, help="Custom Gladstone–Dale product G = Kρ.")
+@case_option
+@k_rho_option
 @click.option(
     "--analytic",
     type=click.Choice(ANALYTIC_NAMES),
@@ -109,9 +107,7 @@ def trace(
         field = analytic_field(analytic)
         source = {"analytic": analytic, "params": field.params}
     else:
-        if case is None and k_rho is None:
-            case = "C1"
-        case_name, g = resolve_k_rho(case=case, k_rho=k_rho)
+        case_name, g = resolve_k_rho(case=case_or_default(case, k_rho), k_rho=k_rho)
         field = load_field(field_path, frame=frame, k_rho=g)
         source = {
             "field": field_path or "shipped sample",
