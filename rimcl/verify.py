@@ -164,6 +164,18 @@ ANALYTIC_STEP = 1e-3
 UNIFORM_STEP = 1e-4
 
 
+def _trace(case, step, precision, device):
+    return trace_rays(
+        case.field,
+        case.origins,
+        case.directions,
+        x_end=case.x_end,
+        step=step,
+        precision=precision,
+        device=device,
+    )
+
+
 def _error(case, result):
     got = result.image_pos if case.compare == "image" else result.end_pos
     distance = np.linalg.norm(got - case.exact, axis=1)
@@ -197,15 +209,7 @@ def run_verification(device=None, rays=16, precisions=None, progress=None):
     rows = []
 
     def run(case, precision, step, interpolation, tolerance):
-        result = trace_rays(
-            case.field,
-            case.origins,
-            case.directions,
-            x_end=case.x_end,
-            step=step,
-            precision=precision,
-            device=device,
-        )
+        result = _trace(case, step, precision, device)
         error = _error(case, result)
         row = {
             "case": case.name,
@@ -248,15 +252,7 @@ def _convergence(case, device, precisions):
     steps = [0.08, 0.04, 0.02, 0.01]
     errors = []
     for step in steps:
-        result = trace_rays(
-            case.field,
-            case.origins,
-            case.directions,
-            x_end=case.x_end,
-            step=step,
-            precision=precision,
-            device=device,
-        )
+        result = _trace(case, step, precision, device)
         errors.append(_error(case, result))
     ratios = [errors[i] / errors[i + 1] for i in range(len(errors) - 1)]
     return {
@@ -274,14 +270,6 @@ def _f32_drift(case, device):
     """Back-projection error of plain float32 vs f32c in a uniform medium (~3e4 steps)."""
     found = {}
     for precision in ("f32", "f32c"):
-        result = trace_rays(
-            case.field,
-            case.origins,
-            case.directions,
-            x_end=case.x_end,
-            step=UNIFORM_STEP,
-            precision=precision,
-            device=device,
-        )
+        result = _trace(case, UNIFORM_STEP, precision, device)
         found[precision] = _error(case, result)
     return {"step": UNIFORM_STEP, "length": case.length, **found}
