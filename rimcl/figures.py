@@ -610,13 +610,37 @@ _BUILDERS = {
 }
 
 
-def _thin_minor_ticks(figure):
-    """No minor ticks on log axes spanning more than three decades: too dense to read,
-    and drawing them doubles the time to save a figure."""
+def _finish_axes(figure):
+    """Make log axes drawable and readable.
+
+    A log axis with nothing positive to show (every error exactly zero, as in a uniform
+    medium) goes back to linear with a note, instead of failing to draw. Log axes
+    spanning more than three decades lose their minor ticks: too dense to read, and
+    drawing them doubles the time to save a figure.
+    """
     for ax in figure.axes:
-        for axis, limits in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
-            low, high = sorted(abs(v) for v in limits)
-            if axis.get_scale() == "log" and low > 0 and high / low > 1e3:
+        if ax.get_label() == "<colorbar>":
+            continue
+        for axis, data_high, set_scale in (
+            (ax.xaxis, ax.dataLim.x1, ax.set_xscale),
+            (ax.yaxis, ax.dataLim.y1, ax.set_yscale),
+        ):
+            if axis.get_scale() != "log":
+                continue
+            if not (np.isfinite(data_high) and data_high > 0):
+                set_scale("linear")
+                ax.text(
+                    0.5,
+                    0.5,
+                    "nothing to show: every value is zero",
+                    ha="center",
+                    va="center",
+                    transform=ax.transAxes,
+                    color="0.4",
+                )
+                continue
+            shown_low, shown_high = sorted(abs(v) for v in axis.get_view_interval())
+            if shown_low > 0 and shown_high / shown_low > 1e3:
                 axis.set_minor_locator(NullLocator())
 
 
@@ -639,7 +663,7 @@ def draw_figure(name, all_tables, stats):
         ``{"panels": ...}``: every number drawn, by panel and series.
     """
     figure, data = _BUILDERS[name](all_tables, stats["cases"])
-    _thin_minor_ticks(figure)
+    _finish_axes(figure)
     return figure, data
 
 

@@ -340,7 +340,9 @@ def summary_markdown(stats, scene):
         "",
         "The random errors are standard deviations of ratios whose denominators come "
         "close to zero for some tracers: they are dominated by the few slowest tracers. "
-        "The robust companions below do not have that weakness. *Baseline* is the error "
+        "The robust companions below do not have that weakness. Where `rms(ε_u)/rms(u)` "
+        "grows more slowly than G, the velocity error is mostly the rounding noise of the "
+        "10-bit images (a few 1e-4 px per frame), not refraction. *Baseline* is the error "
         "of finite differences and rendering without refraction (`u^ref − u`, "
         "`a^ref − a`), which every PTV measurement has.",
         "",

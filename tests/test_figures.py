@@ -1,5 +1,6 @@
 """Figures: every file written, labelled axes, and the numbers beside them match stats."""
 
+import io
 import json
 
 import numpy as np
@@ -89,3 +90,15 @@ def test_relative_error_histograms_are_normalised_pdfs(study):
     random_panel = data["panels"]["e"]
     u3 = next(s for s in random_panel if s["label"] == "u3")
     assert u3["abs_value"] == [case["velocity"]["u3"]["random"] for case in stats["cases"][1:]]
+
+
+def test_a_uniform_medium_alone_draws_every_figure(study):
+    tables, _, _ = study
+    uniform = [tables[0]]
+    stats = compute_stats(uniform)
+    for name in FIGURE_NAMES:
+        figure, _ = draw_figure(name, uniform, stats)
+        figure.savefig(io.BytesIO(), format="png", dpi=30)
+        notes = [text.get_text() for ax in figure.axes for text in ax.texts]
+        if name in ("position_error", "velocity_error", "error_budget"):
+            assert "nothing to show: every value is zero" in notes
