@@ -14,7 +14,8 @@
  * the two half steps, e = (|dR| + depth |dT| / n_ref) / 15 (max norms, depth = P_DEPTH:
  * the lever arm of a direction error on the back-projected image r'). The attempt is
  * kept if e <= P_TOL * n h (error per unit arc length times the arc of the step) and
- * h is rescaled by 0.9 (allowed / e)^(1/4) within [0.2, 4] and [P_STEP_MIN, P_STEP_MAX].
+ * h is rescaled by 0.9 (allowed / e)^(1/4) within [0.2, 2] (no growth straight after a
+ * rejection) and within [P_STEP_MIN, P_STEP_MAX].
  *
  * Required defines: RIMCL_PRECISION (rimcl_real.h), RIMCL_FIELD, RIMCL_INTERP and
  *   RIMCL_PERIODIC (rimcl_field.h). Optional: RIMCL_LANES, RIMCL_POCL_FAST
@@ -341,6 +342,7 @@ __kernel void trace_rays(FIELD_GRID_TYPE grid, const int4 counts, __constant con
     const real h_max = PARAM(params, P_STEP_MAX);
     const real tol_per_arc = PARAM(params, P_TOL);
     const real depth_per_n = PARAM(params, P_DEPTH) / PARAM(params, P_NREF);
+    lmask last_rejected = 0;
 #else
     const lreal h = h_fixed;
 #endif
@@ -369,11 +371,14 @@ __kernel void trace_rays(FIELD_GRID_TYPE grid, const int4 counts, __constant con
         lreal error = step_error(next, full, depth_per_n);
         lreal allowed = tol_per_arc * sa.n * h;
         lmask moving = running & ((error <= allowed) | (h <= h_min));
+        /* grow by 2 at most, and not at all straight after a rejection */
         lreal factor = (real)0.9 * sqrt(sqrt(allowed / error));
-        factor = (factor > (real)0.2) ? ((factor < (real)4) ? factor : (real)4) : (real)0.2;
+        lreal growth = (last_rejected != 0) ? (lreal)((real)1) : (lreal)((real)2);
+        factor = (factor > (real)0.2) ? ((factor < growth) ? factor : growth) : (real)0.2;
         lreal h_next = h * factor;
         h_next = (h_next < h_max) ? ((h_next > h_min) ? h_next : h_min) : h_max;
         rejected = (running & ~moving) ? rejected + 1 : rejected;
+        last_rejected = running ? (running & ~moving) : last_rejected;
         const lreal h_step = h;
         h = running ? h_next : h;
         if (!LANES_ANY(moving))

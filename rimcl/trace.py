@@ -39,8 +39,16 @@ STEP_KEYWORDS = ("adaptive", "auto")
 #: such a pixel (:func:`default_tolerance`).
 PAPER_PIXELS = 8192
 #: Adaptive steps stay within [ADAPTIVE_STEP_RANGE[0], ADAPTIVE_STEP_RANGE[1]] times the
-#: default step (1/512 of a cell to 8 cells of arc on a grid).
+#: default step (1/512 of a cell to 8 cells of arc on a grid; closed-form fields may
+#: also grow to a quarter of the depth).
 ADAPTIVE_STEP_RANGE = (1 / 256, 16.0)
+#: The local error allowed per unit arc length is tolerance / (ADAPTIVE_SAFETY * depth):
+#: local errors add up and propagate along the ray, and interpolated fields have kinks
+#: that the 4th-order estimate sees late.
+ADAPTIVE_SAFETY = 4.0
+#: Smallest adaptive tolerance per precision, relative to the lever arm (the depth): the
+#: step-doubling estimate cannot resolve less than the rounding of the ray state.
+TOLERANCE_FLOOR = {"f32": 1e-5, "f32c": 2e-8, "f64": 1e-13}
 #: A fixed step longer than this many cells of arc is flagged (features narrower than
 #: the step are skipped); it is used, not refused, since smooth fields allow it.
 LONG_STEP_CELLS = 2.0
@@ -375,12 +383,22 @@ def plan_steps(field, step, x_end, origins, precision="f32c", tolerance=None):
             raise RimclError(f"the tolerance must be a positive length, got {tolerance}")
         first = default_step(field)
         lever = float(np.max(np.abs(x_end - origins[:, 0]))) or 1.0
+        floor = TOLERANCE_FLOOR.get(precision, TOLERANCE_FLOOR["f32c"]) * lever
+        if tolerance < floor:
+            raise RimclError(
+                f"tolerance {tolerance:.3g} is below what precision {precision} can resolve "
+                f"over a depth of {lever:.4g} (about {floor:.1g}); use a larger tolerance"
+                + ("" if precision == "f64" else " or precision f64")
+            )
+        largest = first * ADAPTIVE_STEP_RANGE[1]
+        if not isinstance(field, Field):
+            largest = max(largest, lever / (4 * field.n_ref))
         return StepPlan(
             step=_round_to_pairs(first),
             adaptive=True,
             tolerance=tolerance,
             step_min=_round_to_pairs(first * ADAPTIVE_STEP_RANGE[0]),
-            step_max=_round_to_pairs(first * ADAPTIVE_STEP_RANGE[1]),
+            step_max=_round_to_pairs(largest),
             lever=lever,
         )
     if isinstance(step, str):
@@ -418,7 +436,7 @@ def _param_block(field, x_end, plan):
     if plan.adaptive:
         put_pair(_P_STEP_MIN, plan.step_min)
         put_pair(_P_STEP_MAX, plan.step_max)
-        put_pair(_P_TOL, plan.tolerance / plan.lever)
+        put_pair(_P_TOL, plan.tolerance / (ADAPTIVE_SAFETY * plan.lever))
         put_pair(_P_DEPTH, plan.lever)
     return params
 
