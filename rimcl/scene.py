@@ -136,7 +136,7 @@ def _keys():
         SceneKey(
             "tracers",
             "count",
-            250,
+            400,
             "int",
             "tracers in the sheet, uniform random (paper: 1e5)",
             positive=True,
