@@ -305,6 +305,9 @@ def summary_markdown(stats, scene):
     )
     field = scene["field"]["path"] or "the shipped 64³ sample (buoyancy-driven mixing)"
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    devices = ", ".join(
+        sorted({str(entry.get("device", {}).get("device")) for entry in stats["config"]["inputs"]})
+    )
     lines = [
         f"# rimcl study: {len(cases)} cases",
         "",
@@ -312,8 +315,8 @@ def summary_markdown(stats, scene):
         f"{rays}, {scene['renderer']['kind']} renderer, {scene['renderer']['pixels']} pixels "
         f"across the field of view (pixel = {first['pixel_size_over_L']:.3g} L), "
         f"L = {first['length_L']:.4g}, Δt = {first['dt']:.3g}.",
-        "Configuration: `scene.toml`; every number: `stats.json`; figures with their data: "
-        "`figures/`.",
+        f"Device: {devices}. Configuration: `scene.toml`; every number and the software "
+        "versions: `stats.json`; figures with their data: `figures/`.",
         "",
         "## Results",
         "",
