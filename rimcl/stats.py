@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from rimcl.errors import RimclError
-from rimcl.provenance import atomic_path, versions
+from rimcl.provenance import atomic_path, to_json, versions
 
 RENDER_SCHEMA = "render"
 RENDER_SCHEMA_VERSION = 1
@@ -550,8 +550,6 @@ def write_json(path, document, overwrite=True):
     document : dict
     overwrite : bool
     """
-    from rimcl.provenance import to_json
-
     text = json.dumps(json.loads(to_json(document)), indent=2, allow_nan=False)
     with atomic_path(path, overwrite=overwrite) as tmp:
         Path(tmp).write_text(text + "\n")
