@@ -38,10 +38,12 @@ RIMCL_INLINE void bspline_weights(real t, real *w, real *dw)
 RIMCL_INLINE void bspline_axis(real u, int n, int *taps, real *w, real *dw)
 {
 #if RIMCL_PERIODIC
-    u = (fabs(u) < (real)1e9) ? u : (real)0;
+    u = (fabs(u) < (real)1e6) ? u : (real)0;
     real fl = real_floor(u);
-    int i = (int)fl % n;
+    /* fl modulo n without an integer division */
+    int i = (int)(fl - (real)n * real_floor(fl * ((real)1 / (real)n)));
     i += (i < 0) ? n : 0;
+    i -= (i >= n) ? n : 0;
 #pragma unroll
     for (int k = 0; k < 4; ++k) {
         int j = i - 1 + k;
@@ -76,26 +78,29 @@ RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
     size_t row = (size_t)counts.x + 3;
     size_t plane = row * ((size_t)counts.y + 3);
 #endif
-    real value = (real)0, g1 = (real)0, g2 = (real)0, g3 = (real)0;
+    /* x1 rows of 4 coefficients summed over the x2 taps (weights w2 and dw2) in each x3
+     * plane, then over the planes (w3 and dw3); the dot with the x1 weights comes last */
+    real4 sum = (real4)((real)0), sum2 = (real4)((real)0), sum3 = (real4)((real)0);
 #pragma unroll
     for (int c = 0; c < 4; ++c) {
-        /* sums over one x2-x1 plane of taps: value, d/du1, d/du2 */
-        real pv = (real)0, p1 = (real)0, p2 = (real)0;
+        real4 plane_sum = (real4)((real)0), plane_sum2 = (real4)((real)0);
 #pragma unroll
         for (int b = 0; b < 4; ++b) {
             __global const float *line = grid + (size_t)t3[c] * plane + (size_t)t2[b] * row;
-            real q0 = line[t1[0]], q1 = line[t1[1]], q2 = line[t1[2]], q3 = line[t1[3]];
-            real rv = w1[0] * q0 + w1[1] * q1 + w1[2] * q2 + w1[3] * q3;
-            real rd = d1[0] * q0 + d1[1] * q1 + d1[2] * q2 + d1[3] * q3;
-            pv += w2[b] * rv;
-            p1 += w2[b] * rd;
-            p2 += d2[b] * rv;
+            real4 q = convert_real4((float4)(line[t1[0]], line[t1[1]], line[t1[2]], line[t1[3]]));
+            plane_sum += w2[b] * q;
+            plane_sum2 += d2[b] * q;
         }
-        value += w3[c] * pv;
-        g1 += w3[c] * p1;
-        g2 += w3[c] * p2;
-        g3 += d3[c] * pv;
+        sum += w3[c] * plane_sum;
+        sum2 += w3[c] * plane_sum2;
+        sum3 += d3[c] * plane_sum;
     }
+    real4 x1_weights = (real4)(w1[0], w1[1], w1[2], w1[3]);
+    real4 x1_slopes = (real4)(d1[0], d1[1], d1[2], d1[3]);
+    real value = dot(sum, x1_weights);
+    real g1 = dot(sum, x1_slopes);
+    real g2 = dot(sum2, x1_weights);
+    real g3 = dot(sum3, x1_weights);
     real3 grad = (real3)(g1, g2, g3) * PARAM3(params, P_INVH_HI, P_INVH_LO);
     return (real4)(value + PARAM(params, P_NREF), grad.x, grad.y, grad.z);
 }

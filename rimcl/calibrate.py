@@ -44,7 +44,7 @@ REFERENCE_STEP_FRACTION = 0.25
 #: Relative cost of one Sharma step per interpolation, on CPUs and on GPUs (measured
 #: with ``rimcl bench``: PoCL on a 2-core AMD EPYC; NVIDIA H100).
 STEP_COST = {
-    "cpu": {"trilinear": 1.0, "texture": 2.5, "bspline3": 2.5},
+    "cpu": {"trilinear": 1.0, "texture": 4.0, "bspline3": 3.0},
     "gpu": {"trilinear": 1.0, "texture": 0.7, "bspline3": 2.0},
 }
 

@@ -340,7 +340,7 @@ def _long_step_warning(field, step):
     if not isinstance(field, Field):
         return None
     cells = step * field.n_ref / float(np.min(field.spacing))
-    if cells <= LONG_STEP_CELLS:
+    if cells <= LONG_STEP_CELLS * (1 + 1e-6):  # allow for the rounding of the step
         return None
     return (
         f"the step spans {cells:.1f} cells of arc: features narrower than the step are "
