@@ -1,0 +1,184 @@
+"""Ray-steps per second of rimcl.trace_rays, as ratios to a float64 numba baseline.
+
+DESIGN §11: the machines drift by 30-40 % from minute to minute, so only ratios measured
+in one run mean anything. This script times, on one field and one ray set, interleaved:
+
+- the numba float64 implementation of the same method (``rimcl.baseline``: trilinear,
+  same rays, same step, parallel over rays on all CPU cores);
+- ``rimcl.trace_rays`` with every interpolation x precision the device supports (warm:
+  kernel build and field upload excluded);
+- on CPUs, the kernel shapes of DESIGN §11 (rays per work-item, the PoCL switch) for the
+  default trilinear f32c.
+
+and prints a compact table (ray-steps/s, best of the repeats; ratio = median over the
+repeats of the paired ratios to numba) plus the largest difference of r' between the
+default trace and numba, in units of L. Run it on any device:
+
+    python benchmarks/speed.py                      # default device, 128³ field, 30720 rays
+    python benchmarks/speed.py --device nvidia --json gpu.json
+    python benchmarks/speed.py --field sample --repeats 7
+
+The field is a seeded smooth random field (128³ nodes, Δn = 2.8e-4 as air, clamped)
+or the shipped 64³ sample (``--field sample``, case C1); the rays are the paper's
+camera: 30 tracers in the sheet with a 32 x 32 fan each.
+"""
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+import rimcl
+from rimcl.bench import synthetic_density
+from rimcl.device import describe_device, has_fp64
+from rimcl.provenance import to_json, versions
+from rimcl.rays import fan_rays, scene_for
+from rimcl.trace import INTERPOLATIONS, PRECISIONS, KernelShape, default_kernel_shape
+
+
+def make_field(name):
+    """The benchmark field: ``synthetic`` (128³, clamped) or ``sample`` (C1)."""
+    if name == "sample":
+        return rimcl.load_field(None, 0, case="C1")
+    density = synthetic_density(128, seed=3)
+    k_rho = 2.82e-4
+    values = k_rho * (density - density.mean())
+    return rimcl.Field.from_arrays(
+        values, spacing=(1 / 127,) * 3, n_ref=1.0 + k_rho * density.mean(), boundary="clamp"
+    )
+
+
+def timed(function):
+    start = time.perf_counter()
+    result = function()
+    return result, time.perf_counter() - start
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--device", default=None, help="OpenCL device spec (rimcl devices).")
+    parser.add_argument("--field", choices=("synthetic", "sample"), default="synthetic")
+    parser.add_argument("--tracers", type=int, default=30)
+    parser.add_argument("--fan", type=int, default=32)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--no-numba", action="store_true", help="Skip the numba baseline.")
+    parser.add_argument("--json", default=None, help="Also write the results to this file.")
+    args = parser.parse_args()
+
+    device = rimcl.select_device(args.device)
+    field = make_field(args.field)
+    scene = scene_for(field)
+    origins, directions, _ = fan_rays(scene, args.tracers, args.fan, seed=0)
+    x_end = scene.x_end
+    length = float(np.max(scene.fov_size))
+
+    default_shape = default_kernel_shape(device)
+    settings = [
+        (interp, precision, default_shape)
+        for interp in INTERPOLATIONS
+        for precision in PRECISIONS
+        if (interp != "texture" or device.image_support)
+        and (precision != "f64" or has_fp64(device))
+    ]
+    default = ("trilinear", "f32c", default_shape)
+    if default_shape.lanes > 1:  # the kernel shapes of DESIGN §11
+        for lanes, pocl_fast in ((1, False), (1, True), (default_shape.lanes, False)):
+            if (lanes, pocl_fast) != (default_shape.lanes, default_shape.pocl_fast):
+                settings.append(("trilinear", "f32c", KernelShape(lanes, pocl_fast)))
+
+    def run(interp, precision, shape):
+        return rimcl.trace_rays(
+            field,
+            origins,
+            directions,
+            x_end=x_end,
+            interp=interp,
+            precision=precision,
+            device=device,
+            kernel_shape=shape,
+        )
+
+    numba_trace = None
+    if not args.no_numba:
+        from rimcl.baseline import trace_rays_numba
+
+        def numba_trace():
+            return trace_rays_numba(field, origins, directions, x_end=x_end)
+
+        numba_trace()  # compile (cached on disk), warm up
+    for setting in settings:
+        run(*setting)  # build, upload, warm up at the full launch size
+
+    rates = {setting: [] for setting in settings}
+    ratios = {setting: [] for setting in settings}
+    numba_rates = []
+    reference = baseline = None
+    for _ in range(args.repeats):
+        for setting in settings:
+            # numba right before each setting: the pair sees the same machine load
+            if numba_trace is not None:
+                baseline, numba_seconds = timed(numba_trace)
+                numba_rates.append(int(baseline.steps.sum()) / numba_seconds)
+            result, seconds = timed(lambda s=setting: run(*s))
+            rates[setting].append(int(result.steps.sum()) / seconds)
+            if numba_trace is not None:
+                ratios[setting].append(numba_seconds / seconds)
+            if setting == default:
+                reference = result
+
+    rows = [
+        {
+            "interp": interp,
+            "precision": precision,
+            "rays_per_work_item": shape.lanes,
+            "pocl_switch": shape.pocl_fast,
+            "ray_steps_per_s": max(rates[(interp, precision, shape)]),
+            "ratio_to_numba": statistics.median(ratios[(interp, precision, shape)])
+            if ratios[(interp, precision, shape)]
+            else None,
+        }
+        for interp, precision, shape in settings
+    ]
+    agreement = None
+    if baseline is not None:
+        both = reference.ok & baseline.ok
+        agreement = float(np.max(np.abs(reference.image_pos[both] - baseline.image_pos[both])))
+    report = {
+        "device": describe_device(device),
+        "field": field.describe(),
+        "rays": len(origins),
+        "steps_per_ray": float(reference.steps.mean()),
+        "numba_ray_steps_per_s": max(numba_rates) if numba_rates else None,
+        "max_image_difference_to_numba_L": None if agreement is None else agreement / length,
+        "rows": rows,
+        "versions": versions(),
+    }
+    print(f"device: {report['device']['device']} ({report['device']['platform']})")
+    print(
+        f"field: {args.field} {field.shape[::-1]} nodes, {len(origins)} rays, "
+        f"{report['steps_per_ray']:.0f} steps per ray (half a cell of arc)"
+    )
+    if numba_rates:
+        print(f"numba float64 baseline: {max(numba_rates):.3g} ray-steps/s (best)")
+    print(
+        f"{'interp':10s} {'prec':5s} {'rays/item':>9s} {'PoCL sw':>7s} {'ray-steps/s':>12s} "
+        f"{'x numba':>8s}"
+    )
+    for row in rows:
+        ratio = row["ratio_to_numba"]
+        print(
+            f"{row['interp']:10s} {row['precision']:5s} {row['rays_per_work_item']:9d} "
+            f"{'yes' if row['pocl_switch'] else 'no':>7s} {row['ray_steps_per_s']:12.3g} "
+            f"{'-' if ratio is None else f'{ratio:.2f}':>8s}"
+        )
+    if agreement is not None:
+        print(f"max |r' - r'_numba| / L (trilinear f32c): {agreement / length:.2e}")
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as out:
+            out.write(to_json(report))
+    return report
+
+
+if __name__ == "__main__":
+    main()
