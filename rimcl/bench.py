@@ -5,9 +5,8 @@ On a field (default: the shipped sample, as air ``C1`` and water ``C4``) and a r
 combination of interpolation × precision × step is traced, warm (kernel build and field
 upload excluded), and compared with two references:
 
-- ``ref``: ``bspline3`` in float64 at a fine step (an eighth of the default step; a
-  quarter with ``quick``) -- the best answer rimcl can give, so this error includes the
-  interpolation error;
+- ``ref``: ``bspline3`` in float64 at a fine step (a sixteenth of the default step) --
+  the best answer rimcl can give, so this error includes the interpolation error;
 - ``fine``: the same interpolation in float64 at the fine step -- the error of the step
   and precision alone.
 
@@ -54,9 +53,9 @@ QUICK_STEP_FACTORS = (4.0, 1.0, 0.25)
 #: Adaptive-step tolerances in pixels of the camera, full and quick sweeps.
 ADAPTIVE_PIXELS = (1.0, 0.1, 0.01)
 QUICK_ADAPTIVE_PIXELS = (0.1,)
-#: Reference step as a fraction of the default step, full and quick.
-REFERENCE_FRACTION = 1 / 8
-QUICK_REFERENCE_FRACTION = 1 / 4
+#: Reference step as a fraction of the default step: 4 times below the smallest step
+#: swept, so that its own step error is 256 times below that step's.
+REFERENCE_FRACTION = 1 / 16
 #: Tracers and fan size (rays per tracer = fan²), full and quick.
 RAY_SET = (30, 32)
 QUICK_RAY_SET = (8, 16)
@@ -129,8 +128,9 @@ class BenchCase:
 
 
 def synthetic_density(size=64, seed=0):
-    """A smooth random periodic density in [0, 1] on ``size³`` nodes (box 2π), the stand-in
-    for the shipped sample: a sum of 12 random Fourier modes of wavenumber up to 4.
+    """A smooth random periodic density on ``size³`` nodes (box 2π), the stand-in for the
+    shipped sample: 12 random Fourier modes of wavenumber up to 4, scaled to the density
+    range of the mixing flow, light fluid 1 to heavy 1.105 (Atwood number 0.05).
 
     Returns
     -------
@@ -144,7 +144,7 @@ def synthetic_density(size=64, seed=0):
         k = rng.integers(-4, 5, size=3)
         phase = rng.uniform(0, 2 * np.pi)
         values += np.cos(k[0] * x1 + k[1] * x2 + k[2] * x3 + phase) / (1.0 + np.sum(k**2))
-    return (values - values.min()) / np.ptp(values)
+    return 1.0 + 0.105 * (values - values.min()) / np.ptp(values)
 
 
 def bench_cases(field_path=None, cases=DEFAULT_CASES, quick=False, pixels=PAPER_PIXELS, seed=0):
@@ -313,7 +313,7 @@ def run_bench(
         device, quick, interps, precisions
     )
     reference_precision = "f64" if has_fp64(device) else "f32c"
-    fraction = QUICK_REFERENCE_FRACTION if quick else REFERENCE_FRACTION
+    fraction = REFERENCE_FRACTION
     repeats = QUICK_REPEATS if quick else REPEATS
     sweep = _Sweep(
         interps=interps,

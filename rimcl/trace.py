@@ -39,9 +39,10 @@ STEP_KEYWORDS = ("adaptive", "auto")
 #: such a pixel (:func:`default_tolerance`).
 PAPER_PIXELS = 8192
 #: Adaptive steps stay within [ADAPTIVE_STEP_RANGE[0], ADAPTIVE_STEP_RANGE[1]] times the
-#: default step (1/512 of a cell to 8 cells of arc on a grid; closed-form fields may
-#: also grow to a quarter of the depth).
-ADAPTIVE_STEP_RANGE = (1 / 256, 16.0)
+#: default step: 1/512 of a cell to 2 cells of arc on a grid, where longer steps skip
+#: features that the step-doubling estimate then misses too (both of its halves skip
+#: them); closed-form fields may grow to a quarter of the depth.
+ADAPTIVE_STEP_RANGE = (1 / 256, 4.0)
 #: The local error allowed per unit arc length is tolerance / (ADAPTIVE_SAFETY * depth):
 #: local errors add up and propagate along the ray, and interpolated fields have kinks
 #: that the 4th-order estimate sees late.

@@ -21,6 +21,38 @@ DEFINE_SETS = {
         [
             *_product(RIMCL_PRECISION=(0, 1, 2), RIMCL_FIELD=(1, 2, 3, 4), RIMCL_PERIODIC=(0,)),
             *_product(RIMCL_PRECISION=(0, 1, 2), RIMCL_FIELD=(0,), RIMCL_PERIODIC=(0, 1)),
+            # interpolations in the CPU shape (8 rays per work-item, PoCL switch) ...
+            *_product(
+                RIMCL_PRECISION=(0, 1, 2),
+                RIMCL_FIELD=(0,),
+                RIMCL_INTERP=(0, 1, 2),
+                RIMCL_PERIODIC=(0, 1),
+                RIMCL_LANES=(8,),
+                RIMCL_POCL_FAST=(1,),
+            ),
+            # ... and in the GPU shape (one ray per work-item, standard functions)
+            *_product(
+                RIMCL_PRECISION=(0, 1, 2),
+                RIMCL_FIELD=(0,),
+                RIMCL_INTERP=(1, 2),
+                RIMCL_PERIODIC=(0, 1),
+            ),
+            # adaptive steps, other lane widths, closed forms in lanes
+            *_product(
+                RIMCL_PRECISION=(0, 1, 2),
+                RIMCL_FIELD=(0,),
+                RIMCL_INTERP=(0, 2),
+                RIMCL_ADAPTIVE=(1,),
+                RIMCL_LANES=(1, 8),
+            ),
+            *_product(RIMCL_PRECISION=(1,), RIMCL_FIELD=(0,), RIMCL_LANES=(2, 4, 16)),
+            *_product(
+                RIMCL_PRECISION=(1, 2),
+                RIMCL_FIELD=(1, 2, 3, 4),
+                RIMCL_LANES=(8,),
+                RIMCL_POCL_FAST=(1,),
+                RIMCL_ADAPTIVE=(0, 1),
+            ),
         ],
     ),
 }
