@@ -41,11 +41,12 @@ SUBSET_RAYS = 256
 STEP_FACTORS = (4.0, 2.0, 1.0, 0.5, 0.25, 0.125)
 #: The reference step is this fraction of the smallest candidate step.
 REFERENCE_STEP_FRACTION = 0.25
-#: Relative cost of one Sharma step per interpolation, on CPUs and on GPUs (measured
-#: with ``rimcl bench``: PoCL on a 2-core AMD EPYC; NVIDIA H100).
+#: Relative cost of one Sharma step per interpolation, on CPUs and on GPUs (kernel time,
+#: measured with benchmarks/speed.py on a 128³ field: PoCL 3.1 on a 2-core AMD EPYC,
+#: 8 rays per work-item; NVIDIA H100, one ray per work-item).
 STEP_COST = {
-    "cpu": {"trilinear": 1.0, "texture": 4.0, "bspline3": 3.0},
-    "gpu": {"trilinear": 1.0, "texture": 0.7, "bspline3": 2.0},
+    "cpu": {"trilinear": 1.0, "texture": 5.0, "bspline3": 3.0},
+    "gpu": {"trilinear": 1.0, "texture": 0.8, "bspline3": 3.7},
 }
 
 

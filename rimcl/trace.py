@@ -19,6 +19,7 @@ Choices a call makes (DESIGN §4):
 import dataclasses
 import logging
 import math
+import time
 
 import numpy as np
 
@@ -603,8 +604,11 @@ def trace_rays(
     Returns
     -------
     TraceResult
-        ``config`` records the settings used, and for ``auto`` the calibration
-        (``config["auto"]``: the choice, its estimated error and every candidate).
+        ``config`` records the settings used, the work (``sharma_steps``: Sharma steps
+        evaluated, Newton and rejected steps included) and ``kernel_seconds`` (time in
+        the kernel; uploads, downloads and host work excluded), and for ``auto`` the
+        calibration (``config["auto"]``: the choice, its estimated error and every
+        candidate).
     """
     from rimcl.device import select_device
 
@@ -727,13 +731,14 @@ def run_trace(
         from tqdm.auto import tqdm
 
         bar = tqdm(total=count, unit="ray", desc="trace", leave=False)
+    kernel_seconds = 0.0
     try:
         for start in range(0, count, batch_size):
             stop = min(start + batch_size, count)
             rays_in = np.empty((stop - start, _RAY_IN_STRIDE), dtype=np.float32)
             rays_in[:, 0:3], rays_in[:, 3:6] = split_pairs(origins[start:stop])
             rays_in[:, 6:9], rays_in[:, 9:12] = split_pairs(directions[start:stop])
-            cl.enqueue_copy(queue, rays_in_buf, rays_in)
+            cl.enqueue_copy(queue, rays_in_buf, rays_in, is_blocking=True)
             kernel.set_args(
                 field_buffer,
                 counts,
@@ -745,7 +750,10 @@ def run_trace(
                 np.int32(stop - start),
             )
             work_items = -(-(stop - start) // shape.lanes)
+            launched = time.perf_counter()
             cl.enqueue_nd_range_kernel(queue, kernel, (work_items,), None)
+            queue.finish()
+            kernel_seconds += time.perf_counter() - launched
             cl.enqueue_copy(queue, raw_out[start:stop], rays_out_buf)
             cl.enqueue_copy(queue, info[start:stop], info_buf)
             queue.finish()
@@ -765,6 +773,7 @@ def run_trace(
         "rays_per_work_item": shape.lanes,
         "field": field.describe(),
         "sharma_steps": int(info[:, 3].sum(dtype=np.int64)),
+        "kernel_seconds": kernel_seconds,
     }
     if plan.adaptive:
         config["rejected_steps"] = int(info[:, 2].sum(dtype=np.int64))

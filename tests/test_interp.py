@@ -83,6 +83,8 @@ def test_bspline_converges_faster_than_trilinear(periodic):
 @pytest.mark.parametrize("periodic", [False, True])
 @pytest.mark.parametrize("interp", ["trilinear", "texture", "bspline3"])
 def test_kernel_matches_the_float64_reference(device, has_fp64, interp, periodic):
+    if interp == "texture" and not is_pocl(device):
+        pytest.skip("GPU texture units quantise the weights (NVIDIA: to 1/256 of a cell)")
     field = smooth_field(3e-2, periodic=periodic)
     high = 2 * np.pi if periodic else 1.0
     origins, directions = oblique_rays(21, 0.2 * high, 0.8 * high, 0.2, seed=2)
