@@ -50,20 +50,29 @@ precision_option = click.option(
 step_option = click.option(
     "--step",
     default=None,
-    metavar="DT|auto",
-    help="Integration step in t (dt = ds/n); default half a cell of arc; 'auto' calibrates.",
+    metavar="DT|auto|adaptive",
+    help="Integration step in t (dt = ds/n); default half a cell of arc; 'auto' calibrates "
+    "a fixed step, 'adaptive' sizes each step by step doubling (see --tolerance).",
+)
+tolerance_option = click.option(
+    "--tolerance",
+    type=float,
+    default=None,
+    metavar="LENGTH",
+    help="Allowed error of the image points r' for --step adaptive/auto and --interp auto "
+    "(field length units; default 0.01 pixel of the paper's 8192-pixel camera).",
 )
 
 
 def parse_step(value):
-    """``None``, ``"auto"`` or a positive float from a ``--step`` option value."""
-    if value is None or value == "auto":
+    """``None``, ``"auto"``, ``"adaptive"`` or a positive float from a ``--step`` value."""
+    if value is None or value in ("auto", "adaptive"):
         return value
     try:
         step = float(value)
     except ValueError:
         raise click.BadParameter(
-            f"{value!r} is not a number or 'auto'", param_hint="--step"
+            f"{value!r} is not a number, 'auto' or 'adaptive'", param_hint="--step"
         ) from None
     if not step > 0:
         raise click.BadParameter("the step must be positive", param_hint="--step")
