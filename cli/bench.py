@@ -10,11 +10,10 @@ _COLUMNS = (
     ("precision", 4, "prec"),
     ("step_control", 8, "control"),
     ("step_cells", 6, "cells"),
-    ("ray_steps_per_s", 9, "steps/s"),
-    ("us_per_ray", 8, "µs/ray"),
+    ("kernel_ray_steps_per_s", 9, "steps/s"),
+    ("kernel_us_per_ray", 8, "µs/ray"),
     ("err_ref_max_px", 9, "err px"),
     ("err_fine_max_px", 9, "step px"),
-    ("notes", 0, "notes"),
 )
 
 
@@ -68,6 +67,10 @@ def bench(out_dir, quick, field_path, cases, interps, precisions, pixels, device
     adaptive), measure warm ray-steps/s and the error of the image points r' against a
     float64 bspline3 fine-step reference, and chart error against cost.
 
+    Columns: cells = step in cells of arc (adaptive: the mean); steps/s and µs/ray =
+    kernel time (warm; build and transfers excluded); err px = max |r' - r'_ref| in
+    pixels; step px = the same against the same interpolation at the fine step.
+
     Rows where a method fails are marked: f32 drift, a step error above 0.01 pixel,
     rays lost; rays turned back or leaving through the side (water) are counted.
 
@@ -97,6 +100,12 @@ def bench(out_dir, quick, field_path, cases, interps, precisions, pixels, device
         pixels=pixels,
         progress=show,
     )
+    marked = [row for row in report["rows"] if row["notes"]]
+    if marked:
+        click.echo("\nwhere methods fail (and rays that do not reach the exit plane):")
+        for row in marked:
+            setting = " ".join(_format(key, row[key]) for key, _, _ in _COLUMNS[:5])
+            click.echo(f"  {setting} cells: {row['notes']}")
     click.echo(f"\ndevice: {report['meta']['device']['device']}")
     for key in ("csv", "json", "png"):
         click.echo(f"wrote {report[key]}")
