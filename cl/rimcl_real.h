@@ -10,12 +10,16 @@
  *   RIMCL_LANES      rays advanced together by one work-item, in the lanes of vector
  *                    types: 1 (default; GPUs), 2, 4, 8 or 16 (CPUs, where one ray per
  *                    work-item is latency-bound: DESIGN §11).
- *   RIMCL_POCL_FAST  1 on PoCL: helpers forced inline and the compiler's builtins used
- *                    in place of OpenCL library calls that PoCL may not inline
- *                    (floor, fma, clamp); 0 (default) keeps the standard functions.
+ *   RIMCL_POCL_FAST  1 on PoCL (CPUs): helpers forced inline, clang builtins
+ *                    (__builtin_floorf, __builtin_elementwise_floor,
+ *                    __builtin_convertvector) in place of OpenCL library calls that
+ *                    PoCL may not inline, and cell prefetching (rimcl_field.h);
+ *                    0 (default; GPUs) keeps the standard functions.
  * Field samples are float32 in every mode; `real` is the type positions and
- * interpolation weights are computed in (double only in RIMCL_F64); `lreal` is a
- * `real` per lane. No kernels here. Units: none.
+ * interpolation weights are computed in (double only in RIMCL_F64); `lreal` holds a
+ * `real` per lane, `lint` an integer or a lane mask per lane (all bits set = true for
+ * vectors, 1 for one lane); LANE(v, k) / LANE_I(v, k) read and write lane k.
+ * No kernels here. Units: none.
  */
 #ifndef RIMCL_REAL_H
 #define RIMCL_REAL_H

@@ -15,7 +15,8 @@
  * the lever arm of a direction error on the back-projected image r'). The attempt is
  * kept if e <= P_TOL * n h (error per unit arc length times the arc of the step) and
  * h is rescaled by 0.9 (allowed / e)^(1/4) within [0.2, 2] (no growth straight after a
- * rejection) and within [P_STEP_MIN, P_STEP_MAX].
+ * rejection) and within [P_STEP_MIN, P_STEP_MAX]. A ray whose accepted attempt crosses
+ * the exit plane ends with one step from the attempt's start, shortened by Newton.
  *
  * Required defines: RIMCL_PRECISION (rimcl_real.h), RIMCL_FIELD, RIMCL_INTERP and
  *   RIMCL_PERIODIC (rimcl_field.h). Optional: RIMCL_LANES, RIMCL_POCL_FAST
