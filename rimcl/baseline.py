@@ -94,7 +94,6 @@ def _step(nodes, origin, inv_h, n_ref, periodic, r, t, d_a, h, r_out, t_out, s):
         t_out[k] = t[k] + (a[k] + 4.0 * b[k] + c) / 6.0
 
 
-@_jit(parallel=True)
 def _trace(nodes, origin, inv_h, n_ref, periodic, box_lo, box_hi, r0, d0, x_end, h, limit):
     count = r0.shape[0]
     end = np.empty((count, 6))
@@ -157,7 +156,13 @@ def _trace(nodes, origin, inv_h, n_ref, periodic, box_lo, box_hi, r0, d0, x_end,
     return end, info
 
 
-def trace_rays_numba(field, origins, directions, *, x_end, step=None, max_steps=None):
+_trace_parallel = _jit(parallel=True)(_trace)
+_trace_serial = _jit()(_trace)
+
+
+def trace_rays_numba(
+    field, origins, directions, *, x_end, step=None, max_steps=None, parallel=True
+):
     """Trace rays like :func:`rimcl.trace_rays` (trilinear, fixed step) in numba float64.
 
     Parameters
@@ -168,6 +173,9 @@ def trace_rays_numba(field, origins, directions, *, x_end, step=None, max_steps=
     step : float, optional
         Step in ``t``; default :func:`rimcl.trace.default_step`.
     max_steps : int, optional
+    parallel : bool
+        Parallel over rays on all cores (the baseline); False compiles in a third of
+        the time (7 s against 17 s), for tests of the method.
 
     Returns
     -------
@@ -182,7 +190,7 @@ def trace_rays_numba(field, origins, directions, *, x_end, step=None, max_steps=
         max_steps = _default_max_steps(field, step, x_end, origins, directions)
     if numba is None:
         raise RimclError('the numba baseline needs numba: pip install "rimcl[test]"')
-    end, info = _trace(
+    end, info = (_trace_parallel if parallel else _trace_serial)(
         field.packed,
         field.origin,
         1.0 / field.spacing,
