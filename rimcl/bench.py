@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rimcl import __version__
 from rimcl.errors import RimclError
 from rimcl.field import Field
 from rimcl.provenance import atomic_path, to_json, versions
@@ -651,8 +652,14 @@ def plot_pareto(path, rows, meta):
         f" — {meta['device']['device']}",
         fontsize=11,
     )
+    record = {"device": meta["device"], "versions": versions(), "references": meta["references"]}
     with atomic_path(path) as tmp:
-        figure.savefig(tmp, format="png", dpi=130, metadata={"Software": "rimcl bench"})
+        figure.savefig(
+            tmp,
+            format="png",
+            dpi=130,
+            metadata={"Software": f"rimcl bench {__version__}", "Description": to_json(record)},
+        )
 
 
 def bench(
