@@ -173,7 +173,6 @@ def bench_cases(field_path=None, cases=DEFAULT_CASES, quick=False, pixels=PAPER_
     list of BenchCase
     """
     from rimcl.flow.cases import resolve_k_rho
-    from rimcl.flow.fieldfile import load_field
     from rimcl.rays import fan_rays, scene_for
 
     if int(pixels) < 1:
@@ -182,7 +181,7 @@ def bench_cases(field_path=None, cases=DEFAULT_CASES, quick=False, pixels=PAPER_
     found = []
     for case in cases:
         name, k_rho = resolve_k_rho(case=case)
-        field = _load(field_path, k_rho, load_field)
+        field = _load(field_path, k_rho)
         scene = scene_for(field)
         origins, directions, _ = fan_rays(scene, tracers, fan, seed)
         length = float(np.max(scene.fov_size))
@@ -192,7 +191,11 @@ def bench_cases(field_path=None, cases=DEFAULT_CASES, quick=False, pixels=PAPER_
     return found
 
 
-def _load(field_path, k_rho, load_field):
+def _load(field_path, k_rho):
+    """The field of a case: the file's frame 0, the shipped sample, or (no sample) a
+    synthetic density with the sample's range."""
+    from rimcl.flow.fieldfile import load_field
+
     if field_path is not None:
         return load_field(field_path, 0, k_rho=k_rho)
     try:
