@@ -14,6 +14,7 @@ from rimcl.bench import (
     FAIL_STEP,
     QUICK_STEP_FACTORS,
     TOLERANCE_PIXELS,
+    _load,
     mark_failures,
     synthetic_density,
 )
@@ -132,3 +133,16 @@ def test_bench_refuses_unknown_settings(small_field_file, tmp_path, device):
     )  # fmt: skip
     assert result.exit_code == 1
     assert "interp must be among" in result.output
+
+
+def test_without_the_sample_a_synthetic_field_with_its_density_range_stands_in(monkeypatch):
+    import rimcl.flow
+
+    def missing():
+        raise rimcl.RimclError("the shipped sample is missing")
+
+    monkeypatch.setattr(rimcl.flow, "sample_path", missing)
+    field = _load(None, 0.334)
+    assert "synthetic" in field.attrs["source"] and field.periodic
+    # the mixing flow's densities span 1 to 1.105 (Atwood number 0.05)
+    assert field.delta_n_range == pytest.approx(0.334 * 0.105, rel=1e-6)
