@@ -18,6 +18,7 @@ from rimcl.cli.options import (
     precision_option,
     seed_option,
     step_option,
+    tolerance_option,
 )
 
 ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
@@ -52,6 +53,7 @@ ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
 @interp_option
 @precision_option
 @step_option
+@tolerance_option
 @click.option("--max-steps", type=int, default=None, help="Stop rays after this many steps.")
 @device_option
 @seed_option
@@ -78,6 +80,7 @@ def trace(
     interp,
     precision,
     step,
+    tolerance,
     max_steps,
     device_spec,
     seed,
@@ -133,6 +136,7 @@ def trace(
         device=device,
         max_steps=max_steps,
         progress=True,
+        tolerance=tolerance,
     )
     elapsed = time.perf_counter() - started
     config = {
@@ -142,12 +146,21 @@ def trace(
         "rays": rays_path or {"tracers": tracers, "fan": fan, "seed": seed},
     }
     write_trace(output, result, config, device=device, tracer_id=tracer_id, overwrite=overwrite)
+    auto = result.config.get("auto")
+    if auto is not None:
+        click.echo(
+            f"auto: interp {auto['interp']}, step {auto['step']:.4g}, estimated r' error "
+            f"{auto['estimated_error']:.2e} (tolerance {auto['tolerance']:.2e}"
+            f"{'' if auto['met'] else ', NOT met: the most accurate candidate was kept'})"
+        )
     counts = ", ".join(f"{name} {count}" for name, count in result.counts.items())
     ok = result.ok
     click.echo(f"traced {len(result)} rays on {describe_device(device)['device']}: {counts}")
+    work = result.config.get("sharma_steps", int(result.steps.sum()))
+    kernel_seconds = result.config.get("kernel_seconds") or float("nan")
     click.echo(
-        f"step {result.step:.4g} (in t), {result.steps.sum():.3g} ray-steps in {elapsed:.2f} s "
-        f"({result.steps.sum() / elapsed:.3g} ray-steps/s, kernel build included)"
+        f"step {result.step:.4g} (in t): {work:.3g} ray-steps, {elapsed:.2f} s in all "
+        f"(kernel builds included), {work / kernel_seconds:.3g} ray-steps/s in the kernel"
     )
     if ok.any():
         shift = abs(result.image_pos[ok] - result.origins[ok])[:, 1:].max()

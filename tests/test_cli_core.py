@@ -108,3 +108,30 @@ def test_bad_input_is_one_clear_line(device, tmp_path):
     assert missing_dir.exit_code == 1 and "does not exist" in missing_dir.output
     step = CliRunner().invoke(cli, ["trace", "--analytic", "uniform", "--step", "-1"])
     assert step.exit_code == 2 and "positive" in step.output
+
+
+def test_trace_auto_reports_its_choice(device, tmp_path):
+    out = tmp_path / "auto.h5"
+    args = [
+        "trace",
+        "--analytic",
+        "linear",
+        "--tracers",
+        "2",
+        "--fan",
+        "3",
+        "--interp",
+        "auto",
+        "--step",
+        "auto",
+        "--tolerance",
+        "1e-6",
+        "-o",
+        str(out),
+    ]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    assert "auto: interp trilinear" in result.output and "tolerance 1.00e-06" in result.output
+    with h5py.File(out) as f:
+        auto = json.loads(f.attrs["config"])["trace"]["auto"]
+    assert auto["tolerance"] == 1e-6 and auto["estimated_error"] <= 1e-6
