@@ -220,6 +220,13 @@ def _summary(result, device_name):
         f"{attrs['n_frames']} frames on {device_name}"
     )
     click.echo(f"measured rays: {counts}")
+    auto = result.config.get("auto")
+    if auto is not None:
+        click.echo(
+            f"auto: interp {auto['interp']}, estimated r' error {auto['estimated_error']:.2e} "
+            f"(tolerance 0.01 pixel = {auto['tolerance']:.2e}"
+            f"{'' if auto['met'] else ', NOT met: the most accurate candidate was kept'})"
+        )
     flagged = int(np.count_nonzero(rows["flags"]))
     click.echo(f"tracer images flagged: {flagged} of {len(rows['flags'])}")
     error = np.hypot(rows["x2_meas"] - rows["x2_ref"], rows["x3_meas"] - rows["x3_ref"])

@@ -17,6 +17,7 @@ Output file (``rimcl_schema = "render"``, ``schema_version = 1``), written by
 
 import dataclasses
 import json
+import logging
 import math
 import numbers
 import time
@@ -42,6 +43,8 @@ from rimcl.provenance import atomic_path, check_output, stamp_h5, to_json
 from rimcl.render import FrameImage, Renderer, quantize, scale_for
 from rimcl.trace import STATUS_NAMES, default_step, trace_rays
 from rimcl.track import SheetVelocity, first_difference, integrate_tracks, second_difference
+
+logger = logging.getLogger(__name__)
 
 SCHEMA = "render"
 SCHEMA_VERSION = 1
@@ -552,6 +555,21 @@ def run_render(
         start_positions = seed_tracers(tracers, scene, np.random.default_rng(tracer_stream), margin)
         count = len(start_positions)
         batch = max(1, int(rays_per_batch) // cam.rays_per_tracer)
+        calibration = None
+        if interp == "auto":
+            calibration = _calibrate_interp(
+                source,
+                frame_ids[0],
+                g,
+                scene,
+                cam,
+                start_positions,
+                rend,
+                precision,
+                step,
+                device,
+            )
+            interp = calibration["interp"]
         key = {
             "field": source_name,
             "grid": {
@@ -651,6 +669,8 @@ def run_render(
             "tracking_substeps": TRACKING_SUBSTEPS,
             "reference_step": ref_step,
         }
+        if calibration is not None:
+            config["auto"] = calibration
     return _assemble(
         config,
         key,
@@ -669,6 +689,41 @@ def run_render(
         canvas,
         device,
     )
+
+
+#: Tracers whose rays calibrate ``interp="auto"`` (evenly spread over the tracer set).
+CALIBRATION_TRACERS = 16
+
+
+def _calibrate_interp(source, frame, g, scene, cam, positions, rend, precision, step, device):
+    """Choose the interpolation for ``interp="auto"`` once, on the first measured frame.
+
+    The tolerance is 0.01 pixel of this camera. Every batch, frame and the reference then
+    use the same choice, so the reference stays comparable (DESIGN §4.3).
+    """
+    from rimcl.calibrate import calibrate
+
+    chosen = np.unique(np.linspace(0, len(positions) - 1, CALIBRATION_TRACERS).astype(int))
+    origins = np.repeat(scene.in_sheet(positions[chosen]), cam.rays_per_tracer, axis=0)
+    directions = cam.directions(positions[chosen]).reshape(-1, 3)
+    record = calibrate(
+        _load_frame(source, frame, g),
+        origins,
+        directions,
+        x_end=scene.x_end,
+        interp="auto",
+        step=step,
+        precision=precision,
+        device=device,
+        tolerance=0.01 * rend.pixel_size,
+    )
+    logger.info(
+        "auto: interp %s, estimated r' error %.2e (0.01 pixel = %.2e)",
+        record["interp"],
+        record["estimated_error"],
+        record["tolerance"],
+    )
+    return record
 
 
 def _reference_step(step, source):

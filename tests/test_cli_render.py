@@ -1,5 +1,7 @@
 """``rimcl render`` through click's test runner: outputs, one-line errors, nothing lost."""
 
+import json
+
 import h5py
 import numpy as np
 import pytest
@@ -170,3 +172,30 @@ def test_help_lists_the_options():
         "--view-angle",
     ):
         assert option in result.output
+
+
+def test_render_auto_interp_is_chosen_once_and_recorded(device, tmp_path):
+    out = tmp_path / "auto.h5"
+    args = [
+        "render",
+        "--tracers",
+        "3",
+        "--fan",
+        "4",
+        "--pixels",
+        "1024",
+        "--interp",
+        "auto",
+        "--frames",
+        "1",
+        "-o",
+        str(out),
+    ]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    assert "auto: interp" in result.output
+    with h5py.File(out) as f:
+        config = json.loads(f.attrs["config"])
+    assert config["auto"]["interp"] in ("trilinear", "bspline3", "texture")
+    assert config["trace"]["interp"] == config["auto"]["interp"]
+    assert config["auto"]["tolerance"] == pytest.approx(0.01 * 2 * np.pi / 1024)
