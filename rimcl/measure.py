@@ -374,7 +374,7 @@ def _progress(enabled, total):
         return None
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, unit="tracer", desc="render")
+    return tqdm(total=total, unit="tracer", desc="render", disable=None)
 
 
 def _true_motion(source, scene, tracers, times, frame_ids):

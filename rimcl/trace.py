@@ -730,7 +730,7 @@ def run_trace(
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=count, unit="ray", desc="trace", leave=False)
+        bar = tqdm(total=count, unit="ray", desc="trace", leave=False, disable=None)
     kernel_seconds = 0.0
     try:
         for start in range(0, count, batch_size):

@@ -367,7 +367,7 @@ def synthesize(
 
     time = 0.0
     record(time, u_hat, rho_hat)
-    bar = tqdm(desc="spin-up", unit="step", disable=not progress, leave=False)
+    bar = tqdm(desc="spin-up", unit="step", disable=None if progress else True, leave=False)
     with bar:
         while True:
             dt = solver.stable_step(u_hat)
@@ -391,7 +391,9 @@ def synthesize(
     start = time
     result_frames = {"density": [], "velocity": [], "density_gradient": []}
     times = []
-    bar = tqdm(total=frames, desc="frames", unit="frame", disable=not progress, leave=False)
+    bar = tqdm(
+        total=frames, desc="frames", unit="frame", disable=None if progress else True, leave=False
+    )
     with bar:
         for index in range(frames):
             if index:
