@@ -72,7 +72,7 @@ from rimcl.cli.options import (
     "--threshold",
     default=100.0,
     show_default=True,
-    help="Grey threshold of the 10-bit image (paper: 100 air, 500 water).",
+    help="Grey threshold in camera counts (paper, 10 bits: 100 air, 500 water).",
 )
 @click.option(
     "--centroid-weights",
@@ -83,6 +83,13 @@ from rimcl.cli.options import (
 )
 @click.option(
     "--max-window", default=512, show_default=True, help="Largest tracer window side (px)."
+)
+@click.option(
+    "--bit-depth",
+    type=click.IntRange(8, 16),
+    default=10,
+    show_default=True,
+    help="Bits per pixel of the camera (paper: 10); the threshold is in its counts.",
 )
 @interp_option
 @precision_option
@@ -138,6 +145,7 @@ def render(
     threshold,
     centroid_weights,
     max_window,
+    bit_depth,
     interp,
     precision,
     step,
@@ -188,6 +196,7 @@ def render(
         threshold=threshold,
         centroid_weights=centroid_weights,
         max_window=max_window,
+        bit_depth=bit_depth,
         interp=interp,
         precision=precision,
         step=parse_step(step),

@@ -6,7 +6,8 @@ coordinates ``e = (x - origin) / pixel_size`` put pixel ``i`` at ``[i, i + 1)``,
 centre at ``i + 0.5``. Window images are arrays ``(rows, columns) = (x3, x2)``, the
 order of the field's ``(n3, n2)`` planes.
 
-Two renderers (DESIGN §6.3), both producing a 10-bit grey image:
+Two renderers (DESIGN §6.3), both producing a grey image of the camera's bit depth
+(10 bits by default, as in the paper):
 
 - ``paper``: each ray adds its weight to the pixel holding its image point ``r'``; the
   sum is Gaussian-filtered (σ pixels). Binning to pixels makes the image of an undistorted
@@ -17,8 +18,10 @@ Two renderers (DESIGN §6.3), both producing a 10-bit grey image:
 
 A camera records integers: the image is scaled by one factor per tracer (set so the
 reference image of that tracer, seen through a uniform field, peaks at full scale),
-rounded and clipped to ``[0, 1023]``. The same factor is used for the distorted image, so
-the two images are comparable (never a per-image maximum).
+rounded and clipped to ``[0, 2**bits - 1]`` (``[0, 1023]`` for 10 bits). The same factor is
+used for the distorted image, so the two images are comparable (never a per-image maximum).
+The rounding moves centroids by a few 1e-4 pixel at 10 bits; a deeper camera lowers that
+floor.
 """
 
 import dataclasses
@@ -30,7 +33,8 @@ from scipy.special import ndtr
 from rimcl.errors import RimclError
 
 RENDERERS = ("paper", "exact")
-FULL_SCALE = 1023  # 10-bit camera
+BIT_DEPTHS = range(8, 17)  # 8- to 16-bit cameras
+FULL_SCALE = 1023  # the default 10-bit camera
 # the Gaussian is cut at this many σ (scipy's gaussian_filter ``truncate``); windows are
 # padded by as much so that no tracer image is cut by its window
 TRUNCATE_SIGMAS = 4.0
@@ -68,6 +72,8 @@ class Renderer:
         Largest window side (pixels). A tracer whose rays spread wider is rendered in a
         window of this size centred on the median image point; rays outside it are lost
         and counted.
+    bit_depth : int
+        Bits per pixel of the camera (8 to 16); counts run to ``2**bit_depth - 1``.
     """
 
     kind: str
@@ -75,6 +81,7 @@ class Renderer:
     origin: tuple
     psf_sigma: float = 2.3
     max_window: int = 512
+    bit_depth: int = 10
 
     def __post_init__(self):
         if self.kind not in RENDERERS:
@@ -83,11 +90,18 @@ class Renderer:
             raise RimclError(f"the pixel size must be positive, got {self.pixel_size}")
         if not (np.isfinite(self.psf_sigma) and self.psf_sigma > 0):
             raise RimclError(f"the PSF sigma must be positive (pixels), got {self.psf_sigma}")
+        if int(self.bit_depth) not in BIT_DEPTHS:
+            raise RimclError(f"the camera bit depth must be 8 to 16, got {self.bit_depth}")
         if int(self.max_window) < 2 * self.pad + 1:
             raise RimclError(
                 f"the largest window ({self.max_window} px) cannot hold one tracer image "
                 f"of PSF sigma {self.psf_sigma} px"
             )
+
+    @property
+    def full_scale(self):
+        """Largest count the camera records, ``2**bit_depth - 1``."""
+        return 2 ** int(self.bit_depth) - 1
 
     @property
     def pad(self):
@@ -186,12 +200,13 @@ class Renderer:
             "image_origin_x2_x3": list(self.origin),
             "psf_sigma_px": self.psf_sigma,
             "max_window_px": int(self.max_window),
-            "full_scale": FULL_SCALE,
+            "bit_depth": int(self.bit_depth),
+            "full_scale": self.full_scale,
         }
 
 
-def scale_for(reference_image):
-    """The 10-bit scale factor set by a tracer's reference image (its peak → full scale).
+def scale_for(reference_image, full_scale=FULL_SCALE):
+    """The scale factor set by a tracer's reference image (its peak → ``full_scale``).
 
     Returns
     -------
@@ -199,11 +214,11 @@ def scale_for(reference_image):
         Counts per unit of light; NaN when the reference image is empty.
     """
     peak = float(np.max(reference_image)) if reference_image.size else 0.0
-    return FULL_SCALE / peak if peak > 0 else float("nan")
+    return full_scale / peak if peak > 0 else float("nan")
 
 
-def quantize(image, scale):
-    """Counts a 10-bit camera records: scaled, rounded, clipped to ``[0, 1023]``.
+def quantize(image, scale, full_scale=FULL_SCALE):
+    """Counts the camera records: scaled, rounded, clipped to ``[0, full_scale]``.
 
     Returns
     -------
@@ -212,8 +227,8 @@ def quantize(image, scale):
         True if some pixel was clipped at full scale.
     """
     counts = np.rint(image * scale)
-    saturated = bool(np.any(counts > FULL_SCALE))
-    return np.clip(counts, 0, FULL_SCALE), saturated
+    saturated = bool(np.any(counts > full_scale))
+    return np.clip(counts, 0, full_scale), saturated
 
 
 class FrameImage:
@@ -225,10 +240,13 @@ class FrameImage:
     ----------
     width, height : int
         Frame size (pixels along ``x2`` and ``x3``).
+    full_scale : int
+        The camera's largest count.
     """
 
-    def __init__(self, width, height):
+    def __init__(self, width, height, full_scale=FULL_SCALE):
         self.counts = np.zeros((int(height), int(width)), dtype=np.uint16)
+        self.full_scale = int(full_scale)
 
     def add(self, window, counts):
         """Add a window's counts (pixels outside the frame are dropped)."""
@@ -239,4 +257,4 @@ class FrameImage:
             return
         part = counts[r0 - window.row0 : r1 - window.row0, c0 - window.col0 : c1 - window.col0]
         target = self.counts[r0:r1, c0:c1]
-        target[...] = np.minimum(target + part, FULL_SCALE).astype(np.uint16)
+        target[...] = np.minimum(target + part, self.full_scale).astype(np.uint16)

@@ -166,3 +166,29 @@ def test_bad_renderer_settings_rejected(kw, match):
     settings = {"kind": "exact", "pixel_size": 1.0, "origin": (0.0, 0.0), **kw}
     with pytest.raises(RimclError, match=match):
         Renderer(**settings)
+
+
+def test_a_deeper_camera_lowers_the_rounding_noise_of_centroids():
+    """The shift that rounding to counts gives a centroid shrinks with the bit depth
+    (about 2**-6 from 10 to 16 bits); a 7-bit camera is refused."""
+    window = WINDOWS[0]
+    rounding = {}
+    for bits in (10, 16):
+        renderer = _renderer("exact", bit_depth=bits)
+        full = renderer.full_scale
+        threshold = THRESHOLD * full / FULL_SCALE
+        worst = 0.0
+        for dx in OFFSETS:
+            pixels = np.repeat(np.array([[13.0 + dx, 14.37]]), 4, axis=0)
+            raw, _ = renderer.render(pixels, np.ones(4), window)
+            scale = scale_for(raw, full)
+            counts, _ = quantize(raw, scale, full)
+            assert counts.max() == full
+            rounded = locate(counts, threshold)
+            exact = locate(raw * scale, threshold)
+            worst = max(worst, abs(rounded.col - exact.col), abs(rounded.row - exact.row))
+        rounding[bits] = worst
+    assert 1e-5 < rounding[10] < 0.01
+    assert rounding[16] < rounding[10] / 10
+    with pytest.raises(RimclError, match="bit depth"):
+        _renderer("exact", bit_depth=7)
