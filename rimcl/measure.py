@@ -19,28 +19,20 @@ import dataclasses
 import json
 import logging
 import math
-import numbers
 import time
 from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
-from rimcl.camera import CAMERAS, PlaneCamera, PupilCamera, Scene, seed_tracers
-from rimcl.centroid import (
-    CENTROID_WEIGHTS,
-    EXCLUDING,
-    NO_POSITION,
-    NOTES,
-    TracerFlag,
-    flag_names,
-    locate,
-    not_found,
-)
+from rimcl.camera import Scene, seed_tracers
+from rimcl.centroid import EXCLUDING, NOTES, TracerFlag, flag_names
+from rimcl.config import MeasureConfig
 from rimcl.errors import RimclError
 from rimcl.field import Field
+from rimcl.imaging import Imaging, empty_columns, image_batch
 from rimcl.provenance import atomic_path, check_output, stamp_h5, to_json
-from rimcl.render import FrameImage, Renderer, quantize, scale_for
+from rimcl.render import FrameImage
 from rimcl.trace import STATUS_NAMES, default_step, trace_rays
 from rimcl.track import SheetVelocity, first_difference, integrate_tracks, second_difference
 
@@ -49,28 +41,6 @@ logger = logging.getLogger(__name__)
 SCHEMA = "render"
 SCHEMA_VERSION = 1
 TRACKING_SUBSTEPS = 8  # RK4 steps between frames (error ~1e-9 of the motion at Δt = 0.005)
-DEFAULT_RAYS_PER_BATCH = 1 << 17  # rays traced per batch: ~40 MB of host memory
-DEFAULT_RAY_SAMPLE = 20_000
-
-# per tracer and frame: what one imaging pass (reference or measured) records
-_IMAGE_COLUMNS = {
-    "x2": np.float64,
-    "x3": np.float64,
-    "area": np.int64,
-    "perimeter": np.float64,
-    "circularity": np.float64,
-    "n_rays_ok": np.int64,
-    "flags": np.int64,
-    "peak": np.float64,
-    "scale": np.float64,
-}
-
-
-def _new_images(frames, tracers):
-    return {
-        name: np.full((frames, tracers), np.nan if dtype is np.float64 else 0, dtype=dtype)
-        for name, dtype in _IMAGE_COLUMNS.items()
-    }
 
 
 @dataclasses.dataclass
@@ -88,9 +58,8 @@ class Reference:
     outside : ndarray, bool, shape (F, N)
         True positions outside the velocity grid (clamped fields only).
     images : dict of str to ndarray (F, N)
-        Reference image results (``x2, x3, area, perimeter, circularity, n_rays_ok,
-        flags, peak, scale``; ``peak`` is the unclipped brightest pixel in counts, ``scale``
-        the 10-bit factor reused for the measured images).
+        Reference image columns (:data:`rimcl.imaging.IMAGE_COLUMNS`; ``scale`` is the
+        factor reused for the measured images).
     ray_counts : dict of str to int
         Trace status counts of all reference rays, plus ``vignetted``.
     ray_steps : int
@@ -197,44 +166,141 @@ def _uniform_like(source):
     )
 
 
-def _make_camera(
-    scene,
-    camera,
-    fan,
-    pupil_rays,
-    aperture_diameter,
-    focal_length,
-    f_number,
-    camera_distance,
-    view_angle,
-):
-    if camera not in CAMERAS:
-        raise RimclError(f"unknown camera {camera!r}; choose from {CAMERAS}")
-    if camera == "plane":
-        return PlaneCamera(scene, int(fan))
-    distance = 4.0 * scene.depth if camera_distance is None else float(camera_distance)
-    if aperture_diameter is None and focal_length is None and f_number is None:
-        aperture_diameter = 0.25 * distance
-    return PupilCamera.from_optics(
-        scene,
-        distance,
-        diameter=aperture_diameter,
-        focal_length=focal_length,
-        f_number=f_number,
-        view_angle=float(view_angle),
-        rays=int(pupil_rays),
+@dataclasses.dataclass
+class Setup:
+    """One run's configuration resolved against its field: what every stage shares.
+
+    Attributes
+    ----------
+    source : FieldFile
+        The open field file.
+    scene : rimcl.camera.Scene
+        Sheet, exit plane and field of view.
+    camera : PlaneCamera or PupilCamera
+    imaging : rimcl.imaging.Imaging
+    trace_options : dict
+        ``interp``, ``precision``, ``step`` and ``device`` for :func:`rimcl.trace_rays`.
+    frame_ids : list of int
+        Stored frames imaged.
+    times : ndarray, shape (F,)
+    dt : float
+        Time between frames (NaN for one frame).
+    start_positions : ndarray, shape (N, 2)
+        Tracers at the first frame.
+    batch : int
+        Tracers traced per batch.
+    key : dict
+        The case-independent configuration (a reusable reference must match it).
+    timings : dict of str to float
+        Seconds per stage, filled as the stages run.
+    """
+
+    source: object
+    scene: Scene
+    camera: object
+    imaging: Imaging
+    trace_options: dict
+    frame_ids: list
+    times: np.ndarray
+    dt: float
+    start_positions: np.ndarray
+    batch: int
+    key: dict
+    timings: dict
+
+
+def _frames_of(source, time_config):
+    """Frame indices, their times and the spacing, checked against the file."""
+    frames, start_frame = int(time_config.frames), int(time_config.start_frame)
+    frame_ids = list(range(start_frame, start_frame + frames))
+    if start_frame < 0 or frame_ids[-1] >= source.n_frames:
+        raise RimclError(
+            f"{frames} frames from frame {start_frame} need frames up to {frame_ids[-1]}, "
+            f"but the field has {source.n_frames} (0..{source.n_frames - 1})"
+        )
+    times = np.asarray(source.times, dtype=np.float64)[frame_ids]
+    dt = float(times[1] - times[0]) if frames > 1 else float("nan")
+    if frames == 3 and not math.isclose(times[2] - times[1], dt, rel_tol=1e-6):
+        raise RimclError(
+            f"frames {frame_ids} are not equally spaced in time ({times.tolist()}); "
+            "the second difference needs equal spacing"
+        )
+    return frame_ids, times, dt
+
+
+def _setup(source, source_name, g, config, streams):
+    """Resolve the configuration against the field: scene, camera, imaging, tracers, key."""
+    from rimcl.device import describe_device, select_device
+
+    frame_ids, times, dt = _frames_of(source, config.time)
+    scene = Scene.from_grid(
+        source.origin, source.spacing, source.shape, source.boundary, config.x_sheet, config.depth
     )
+    camera = config.camera.build(scene)
+    imaging = config.renderer.build(scene)
+    device = select_device(config.run.device)
+    start_positions = seed_tracers(
+        config.tracers.count,
+        scene,
+        np.random.default_rng(streams[0]),
+        config.tracers.margin,
+    )
+    integrator = config.integrator
+    trace_options = {
+        "step": integrator.step,
+        "interp": integrator.interp,
+        "precision": integrator.precision,
+        "device": device,
+    }
+    setup = Setup(
+        source=source,
+        scene=scene,
+        camera=camera,
+        imaging=imaging,
+        trace_options=trace_options,
+        frame_ids=frame_ids,
+        times=times,
+        dt=dt,
+        start_positions=start_positions,
+        batch=max(1, int(config.run.rays_per_batch) // camera.rays_per_tracer),
+        key={},
+        timings={"track": 0.0, "trace": 0.0, "render": 0.0, "centroid": 0.0},
+    )
+    calibration = None
+    if integrator.interp == "auto":
+        calibration = _calibrate_interp(setup, g)
+        trace_options["interp"] = calibration["interp"]
+    setup.key = {
+        "field": source_name,
+        "grid": {
+            "origin": np.asarray(source.origin).tolist(),
+            "spacing": np.asarray(source.spacing).tolist(),
+            "shape_n3_n2_n1": list(source.shape),
+            "boundary": source.boundary,
+        },
+        "frames": frame_ids,
+        "times": times.tolist(),
+        "scene": scene.describe(),
+        "tracers": len(start_positions),
+        "seed": int(config.tracers.seed),
+        "margin": float(config.tracers.margin),
+        "camera": camera.describe(),
+        "render": imaging.describe(),
+        "trace": {
+            "interp": trace_options["interp"],
+            "precision": integrator.precision,
+            "step": None if integrator.step is None else float(integrator.step),
+            "device": describe_device(device),
+        },
+    }
+    return setup, calibration
 
 
 class _Pass:
     """One imaging pass (reference or measured) over all tracers of all frames."""
 
-    def __init__(self, frames, tracers, renderer, threshold, weights, timings):
-        self.images = _new_images(frames, tracers)
-        self.renderer = renderer
-        self.threshold = threshold
-        self.weights = weights
-        self.timings = timings
+    def __init__(self, frames, tracers):
+        self.images = empty_columns((frames, tracers))
         self.status_counts = np.zeros(len(STATUS_NAMES), dtype=np.int64)
         self.vignetted = 0
         self.ray_steps = 0
@@ -245,86 +311,60 @@ class _Pass:
         counts["vignetted"] = int(self.vignetted)
         return counts
 
-    def image_tracer(self, frame, tracer, points, flags, scale=None, canvas=None):
-        """Render and locate one tracer from the image points ``(K, 2)`` of its rays."""
-        row = self.images
-        row["n_rays_ok"][frame, tracer] = len(points)
-        if len(points) == 0:
-            blob, window, saturated = not_found(flags | TracerFlag.NO_RAYS), None, False
-        else:
-            start = time.perf_counter()
-            pixels = self.renderer.to_pixels(points)
-            window = self.renderer.window_for(pixels)
-            raw, outside = self.renderer.render(pixels, np.ones(len(pixels)), window)
-            if outside:
-                flags |= TracerFlag.RAYS_OUTSIDE_WINDOW
-            full_scale = self.renderer.full_scale
-            if scale is None:  # the reference pass sets each tracer's scale
-                scale = scale_for(raw, full_scale)
-            counts, saturated = quantize(raw, scale, full_scale)
-            row["peak"][frame, tracer] = float(np.max(raw)) * scale
-            middle = time.perf_counter()
-            blob = locate(counts, self.threshold, self.weights)
-            self.timings["render"] += middle - start
-            self.timings["centroid"] += time.perf_counter() - middle
-            if canvas is not None:
-                canvas.add(window, counts)
-        flags |= blob.flags
-        if saturated:
-            flags |= TracerFlag.SATURATED
-        if not blob.flags & NO_POSITION:
-            x2, x3 = self.renderer.to_sheet([window.col0 + blob.col, window.row0 + blob.row])
-            row["x2"][frame, tracer], row["x3"][frame, tracer] = x2, x3
-        row["area"][frame, tracer] = blob.area
-        row["perimeter"][frame, tracer] = blob.perimeter
-        row["circularity"][frame, tracer] = blob.circularity
-        row["flags"][frame, tracer] = int(flags)
-        row["scale"][frame, tracer] = scale if scale is not None else np.nan
 
+def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None):
+    """Trace, render and locate every tracer of one frame, one batch at a time (stage 1–3).
 
-def _image_frame(
-    pass_,
-    frame,
-    field,
-    positions,
-    scene,
-    camera,
-    trace_options,
-    batch,
-    scales=None,
-    canvas=None,
-    sampler=None,
-    bar=None,
-):
-    """Trace, render and centroid every tracer of one frame, one batch at a time."""
+    Parameters
+    ----------
+    setup : Setup
+    pass_ : _Pass
+        Receives the image columns of frame ``frame`` and the ray counts.
+    field : rimcl.Field
+        The refractive-index field of this frame (or the uniform one).
+    positions : ndarray, shape (N, 2)
+        Tracer positions at this frame.
+    scales : ndarray, shape (N,), optional
+        The reference pass's scale factors (None in the reference pass).
+    extras : dict, optional
+        ``sampler`` (a :class:`_RaySampler`), ``canvas`` (a :class:`FrameImage`) and
+        ``bar`` (a progress bar), each optional.
+    """
+    extras = extras or {}
+    camera, scene, timings = setup.camera, setup.scene, setup.timings
     rays = camera.rays_per_tracer
-    for first in range(0, len(positions), batch):
-        ids = np.arange(first, min(first + batch, len(positions)))
+    for first in range(0, len(positions), setup.batch):
+        ids = np.arange(first, min(first + setup.batch, len(positions)))
         origins = np.repeat(scene.in_sheet(positions[ids]), rays, axis=0)
         directions = camera.directions(positions[ids]).reshape(-1, 3)
         start = time.perf_counter()
-        result = trace_rays(field, origins, directions, x_end=scene.x_end, **trace_options)
-        pass_.timings["trace"] += time.perf_counter() - start
+        result = trace_rays(field, origins, directions, x_end=scene.x_end, **setup.trace_options)
+        timings["trace"] += time.perf_counter() - start
         ok = result.status == 0
         collected = ok & camera.collected(result.end_pos, result.end_dir)
         pass_.status_counts += np.bincount(result.status, minlength=len(STATUS_NAMES))
         pass_.vignetted += int(np.count_nonzero(ok & ~collected))
         pass_.ray_steps += int(result.steps.sum())
-        if sampler is not None:
-            sampler.take(ids[0] * rays, result, collected)
-        points = result.image_pos[:, 1:].reshape(len(ids), rays, 2)
+        if extras.get("sampler") is not None:
+            extras["sampler"].take(ids[0] * rays, result, collected)
         ok = ok.reshape(len(ids), rays)
         collected = collected.reshape(len(ids), rays)
-        for k, tracer in enumerate(ids):
-            flags = TracerFlag(0)
-            if not ok[k].all():
-                flags |= TracerFlag.RAYS_FAILED
-            if (ok[k] & ~collected[k]).any():
-                flags |= TracerFlag.RAYS_VIGNETTED
-            scale = None if scales is None else scales[frame, tracer]
-            pass_.image_tracer(frame, tracer, points[k][collected[k]], flags, scale, canvas)
-        if bar is not None:
-            bar.update(len(ids))
+        flags = np.where(ok.all(axis=1), 0, int(TracerFlag.RAYS_FAILED))
+        flags |= np.where((ok & ~collected).any(axis=1), int(TracerFlag.RAYS_VIGNETTED), 0)
+        columns = image_batch(
+            setup.imaging,
+            result.image_pos[:, 1:].reshape(len(ids), rays, 2),
+            collected,
+            1.0,
+            flags,
+            scales=None if scales is None else scales[ids],
+            timings=timings,
+            canvas=extras.get("canvas"),
+        )
+        for name, values in columns.items():
+            pass_.images[name][frame, ids] = values
+        if extras.get("bar") is not None:
+            extras["bar"].update(len(ids))
 
 
 class _RaySampler:
@@ -396,44 +436,13 @@ def _true_motion(source, scene, tracers, times, frame_ids):
     return tracks, velocity(tracers, times[0]), outside
 
 
-def run_render(
-    field=None,
-    *,
-    case=None,
-    k_rho=None,
-    tracers=1000,
-    camera="plane",
-    fan=32,
-    pupil_rays=1024,
-    aperture_diameter=None,
-    focal_length=None,
-    f_number=None,
-    camera_distance=None,
-    view_angle=0.0,
-    renderer="exact",
-    pixels=8192,
-    psf_sigma=2.3,
-    threshold=100.0,
-    centroid_weights="excess",
-    max_window=512,
-    bit_depth=10,
-    interp="trilinear",
-    precision="f32c",
-    step=None,
-    seed=0,
-    frames=3,
-    start_frame=0,
-    margin=0.05,
-    x_sheet=None,
-    depth=None,
-    frame_image=False,
-    ray_sample=DEFAULT_RAY_SAMPLE,
-    rays_per_batch=DEFAULT_RAYS_PER_BATCH,
-    reference=None,
-    device=None,
-    progress=False,
-):
+def run_render(field=None, *, case=None, k_rho=None, config=None, reference=None, progress=False):
     """Run the synthetic PTV measurement of one refractive-index case.
+
+    The stages: resolve the configuration against the field (:class:`Setup`); the true
+    tracks and the reference images through a uniform medium (:func:`make_reference`,
+    skipped when ``reference`` is given); the measured images through each frame's field;
+    velocities, accelerations and the output tables.
 
     Parameters
     ----------
@@ -443,62 +452,11 @@ def run_render(
         ``"C0"`` … ``"C4"``; or give ``k_rho``. Not for files storing ``delta_n``.
     k_rho : float, optional
         Gladstone–Dale product ``G`` (``n = 1 + G ρ``); 0 is a uniform medium.
-    tracers : int
-        Number of tracers, seeded uniformly over the field of view.
-    camera : {"plane", "pupil"}
-        ``plane``: rays aimed at a ``fan x fan`` grid on the exit plane (the paper);
-        ``pupil``: ``pupil_rays`` rays aimed over a circular aperture.
-    fan : int
-        Aim points per side of the plane camera (paper: 100).
-    pupil_rays : int
-        Rays per tracer of the pupil camera.
-    aperture_diameter : float, optional
-        Pupil diameter (length units); or ``focal_length`` / ``f_number``. Default: a
-        quarter of the camera distance.
-    focal_length, f_number : float, optional
-    camera_distance : float, optional
-        From the sheet to the pupil centre along the viewing axis (length units; default
-        4 L1).
-    view_angle : float
-        Angle of the viewing axis to ``x1``, towards ``+x2`` (degrees).
-    renderer : {"exact", "paper"}
-        Pixel-integrated Gaussian per ray, or the paper's binning and Gaussian filter.
-    pixels : int
-        Pixels across the wider side of the field of view (paper: 8192).
-    psf_sigma : float
-        Gaussian point-spread σ (pixels). 2.3 px gives a ~10 px tracer image at a
-        threshold of 100 counts, as in the paper.
-    threshold : float
-        Grey threshold in counts of the camera (paper, 10 bits: 100 for air, 500 for water).
-    centroid_weights : {"excess", "grey"}
-        See :mod:`rimcl.centroid`.
-    max_window : int
-        Largest per-tracer window side (pixels).
-    bit_depth : int
-        Bits per pixel of the camera, 8 to 16 (paper: 10). The rounding to counts moves
-        centroids by a few 1e-4 pixel at 10 bits, a floor under small refraction errors.
-    interp, precision, step :
-        Passed to :func:`rimcl.trace_rays`.
-    seed : int
-        Seeds tracers and the ray subsample; the same seed gives the same tracers and rays
-        in every case (common random numbers).
-    frames : {1, 2, 3}
-        Frames imaged: 1 (positions), 2 (+ velocity), 3 (+ acceleration).
-    start_frame : int
-        First stored frame used; frames are consecutive.
-    margin : float
-        Edge band of the field of view left free of tracers (fraction of its width).
-    x_sheet, depth : float, optional
-        Sheet position and traced depth ``L1`` (defaults: see :meth:`Scene.from_grid`).
-    frame_image : bool
-        Also keep a full image of all tracers of the first frame (measured).
-    ray_sample : int
-        Measured rays of the first frame kept for diagnostics.
-    rays_per_batch : int
-        Rays traced per batch; bounds the memory.
+    config : rimcl.config.MeasureConfig, optional
+        Camera, renderer, integrator, tracers, time and run settings (defaults: the
+        dataclasses' defaults).
     reference : Reference, optional
         From an earlier result with the same configuration: skips the reference pass.
-    device : str or pyopencl.Device, optional
     progress : bool
         Show a progress bar.
 
@@ -506,209 +464,84 @@ def run_render(
     -------
     RenderResult
     """
-    from rimcl.device import describe_device, select_device
-
-    if centroid_weights not in CENTROID_WEIGHTS:
-        raise RimclError(
-            f"unknown centroid weights {centroid_weights!r}; choose from {CENTROID_WEIGHTS}"
-        )
-    if int(frames) not in (1, 2, 3):
-        raise RimclError(f"frames must be 1, 2 or 3, got {frames}")
-    if int(pixels) < 1:
-        raise RimclError(f"the image needs at least 1 pixel, got {pixels}")
-    if step is not None and not (isinstance(step, numbers.Real) and step > 0):
-        raise RimclError(f"the step must be a positive number (or None: half a cell), got {step!r}")
-    frames = int(frames)
+    config = MeasureConfig() if config is None else config
     with ExitStack() as stack:
         source, source_name = _open_source(field, stack)
         case_name, g = _case_of(source, case, k_rho)
-        frame_ids = list(range(int(start_frame), int(start_frame) + frames))
-        if start_frame < 0 or frame_ids[-1] >= source.n_frames:
-            raise RimclError(
-                f"{frames} frames from frame {start_frame} need frames up to {frame_ids[-1]}, "
-                f"but the field has {source.n_frames} (0..{source.n_frames - 1})"
-            )
-        times = np.asarray(source.times, dtype=np.float64)[frame_ids]
-        dt = float(times[1] - times[0]) if frames > 1 else float("nan")
-        if frames == 3 and not math.isclose(times[2] - times[1], dt, rel_tol=1e-6):
-            raise RimclError(
-                f"frames {frame_ids} are not equally spaced in time ({times.tolist()}); "
-                "the second difference needs equal spacing"
-            )
-        scene = Scene.from_grid(
-            source.origin, source.spacing, source.shape, source.boundary, x_sheet, depth
-        )
-        cam = _make_camera(
-            scene,
-            camera,
-            fan,
-            pupil_rays,
-            aperture_diameter,
-            focal_length,
-            f_number,
-            camera_distance,
-            view_angle,
-        )
-        pixel_size = float(np.max(scene.fov_size)) / int(pixels)
-        rend = Renderer(
-            renderer,
-            pixel_size,
-            tuple(scene.fov_lo),
-            float(psf_sigma),
-            int(max_window),
-            int(bit_depth),
-        )
-        if not (np.isfinite(threshold) and 0 <= threshold < rend.full_scale):
-            raise RimclError(
-                f"the threshold must be in [0, {rend.full_scale}) counts of the "
-                f"{rend.bit_depth}-bit camera, got {threshold}"
-            )
-        device = select_device(device)
-        tracer_stream, sample_stream = np.random.SeedSequence(int(seed)).spawn(2)
-        start_positions = seed_tracers(tracers, scene, np.random.default_rng(tracer_stream), margin)
-        count = len(start_positions)
-        batch = max(1, int(rays_per_batch) // cam.rays_per_tracer)
-        calibration = None
-        if interp == "auto":
-            calibration = _calibrate_interp(
-                source,
-                frame_ids[0],
-                g,
-                scene,
-                cam,
-                start_positions,
-                rend,
-                precision,
-                step,
-                device,
-            )
-            interp = calibration["interp"]
-        key = {
-            "field": source_name,
-            "grid": {
-                "origin": np.asarray(source.origin).tolist(),
-                "spacing": np.asarray(source.spacing).tolist(),
-                "shape_n3_n2_n1": list(source.shape),
-                "boundary": source.boundary,
-            },
-            "frames": frame_ids,
-            "times": times.tolist(),
-            "scene": scene.describe(),
-            "tracers": count,
-            "seed": int(seed),
-            "margin": float(margin),
-            "camera": cam.describe(),
-            "render": {
-                **rend.describe(),
-                "threshold": float(threshold),
-                "centroid_weights": centroid_weights,
-            },
-            "trace": {
-                "interp": interp,
-                "precision": precision,
-                "step": None if step is None else float(step),
-                "device": describe_device(device),
-            },
-        }
-        ref_step = _reference_step(step, source)
-        timings = {"track": 0.0, "trace": 0.0, "render": 0.0, "centroid": 0.0}
-        passes = frames if reference is not None else 2 * frames
-        bar = _progress(progress, passes * count)
+        streams = np.random.SeedSequence(int(config.tracers.seed)).spawn(2)
+        setup, calibration = _setup(source, source_name, g, config, streams)
+        count = len(setup.start_positions)
+        frames = len(setup.frame_ids)
+        bar = _progress(progress, (frames if reference is not None else 2 * frames) * count)
         try:
             if reference is None:
-                reference = _make_reference(
-                    source,
-                    scene,
-                    cam,
-                    rend,
-                    key,
-                    start_positions,
-                    times,
-                    frame_ids,
-                    threshold,
-                    centroid_weights,
-                    timings,
-                    batch,
-                    device,
-                    ref_step,
-                    interp,
-                    precision,
-                    bar,
-                )
-            elif reference.key != key:
-                changed = sorted(k for k in key if reference.key.get(k) != key[k])
+                reference = make_reference(setup, bar)
+            elif reference.key != setup.key:
+                changed = sorted(k for k in setup.key if reference.key.get(k) != setup.key[k])
                 raise RimclError(
                     "the reference was made for another configuration (differs in: "
                     f"{', '.join(changed)})"
                 )
-            measured = _Pass(frames, count, rend, threshold, centroid_weights, timings)
             sampler = _RaySampler(
-                count * cam.rays_per_tracer, ray_sample, np.random.default_rng(sample_stream)
+                count * setup.camera.rays_per_tracer,
+                config.run.ray_sample,
+                np.random.default_rng(streams[1]),
             )
             canvas = None
-            if frame_image:
-                extent = np.ceil(scene.fov_size / pixel_size).astype(int)
-                canvas = FrameImage(extent[0], extent[1], rend.full_scale)
-            options = {"step": step, "interp": interp, "precision": precision, "device": device}
-            delta_n_max = 0.0
-            for f, frame in enumerate(frame_ids):
-                field_f = _load_frame(source, frame, g)
-                delta_n_max = max(delta_n_max, field_f.delta_n_range)
-                _image_frame(
-                    measured,
-                    f,
-                    field_f,
-                    reference.tracks[f],
-                    scene,
-                    cam,
-                    options,
-                    batch,
-                    scales=reference.images["scale"],
-                    canvas=canvas if f == 0 else None,
-                    sampler=sampler if f == 0 else None,
-                    bar=bar,
-                )
-                del field_f
+            if config.run.frame_image:
+                pixel_size = setup.imaging.renderer.pixel_size
+                extent = np.ceil(setup.scene.fov_size / pixel_size).astype(int)
+                canvas = FrameImage(extent[0], extent[1], setup.imaging.renderer.full_scale)
+            measured, delta_n_max = _measure(setup, g, reference, sampler, canvas, bar)
         finally:
             if bar is not None:
                 bar.close()
-        config = {
-            **key,
+        run_config = {
+            **setup.key,
             "case": case_name,
             "k_rho": g,
-            "start_frame": int(start_frame),
-            "rays_per_batch": int(rays_per_batch),
-            "ray_sample": int(ray_sample),
+            "start_frame": int(config.time.start_frame),
+            "rays_per_batch": int(config.run.rays_per_batch),
+            "ray_sample": int(config.run.ray_sample),
+            "engine": config.run.engine,
             "tracking_substeps": TRACKING_SUBSTEPS,
-            "reference_step": ref_step,
+            "reference_step": _reference_step(config.integrator.step, source),
         }
         if calibration is not None:
-            config["auto"] = calibration
-    return _assemble(
-        config,
-        key,
-        reference,
-        measured,
-        sampler,
-        cam,
-        rend,
-        scene,
-        times,
-        dt,
-        case_name,
-        g,
-        delta_n_max,
-        timings,
-        canvas,
-        device,
-    )
+            run_config["auto"] = calibration
+    result = _assemble(setup, run_config, reference, measured, sampler, delta_n_max)
+    result.frame_image = None if canvas is None else canvas.counts
+    return result
+
+
+def _measure(setup, g, reference, sampler, canvas, bar):
+    """The measured pass: every frame through its field, with the reference's scales."""
+    measured = _Pass(len(setup.frame_ids), len(setup.start_positions))
+    delta_n_max = 0.0
+    for f, frame in enumerate(setup.frame_ids):
+        field = _load_frame(setup.source, frame, g)
+        delta_n_max = max(delta_n_max, field.delta_n_range)
+        extras = {"bar": bar}
+        if f == 0:
+            extras.update(sampler=sampler, canvas=canvas)
+        _image_frame(
+            setup,
+            measured,
+            f,
+            field,
+            reference.tracks[f],
+            scales=reference.images["scale"][f],
+            extras=extras,
+        )
+        del field
+    return measured, delta_n_max
 
 
 #: Tracers whose rays calibrate ``interp="auto"`` (evenly spread over the tracer set).
 CALIBRATION_TRACERS = 16
 
 
-def _calibrate_interp(source, frame, g, scene, cam, positions, rend, precision, step, device):
+def _calibrate_interp(setup, g):
     """Choose the interpolation for ``interp="auto"`` once, on the first measured frame.
 
     The tolerance is 0.01 pixel of this camera. Every batch, frame and the reference then
@@ -716,19 +549,20 @@ def _calibrate_interp(source, frame, g, scene, cam, positions, rend, precision, 
     """
     from rimcl.calibrate import calibrate
 
+    positions, camera = setup.start_positions, setup.camera
     chosen = np.unique(np.linspace(0, len(positions) - 1, CALIBRATION_TRACERS).astype(int))
-    origins = np.repeat(scene.in_sheet(positions[chosen]), cam.rays_per_tracer, axis=0)
-    directions = cam.directions(positions[chosen]).reshape(-1, 3)
+    origins = np.repeat(setup.scene.in_sheet(positions[chosen]), camera.rays_per_tracer, axis=0)
+    directions = camera.directions(positions[chosen]).reshape(-1, 3)
     record = calibrate(
-        _load_frame(source, frame, g),
+        _load_frame(setup.source, setup.frame_ids[0], g),
         origins,
         directions,
-        x_end=scene.x_end,
+        x_end=setup.scene.x_end,
         interp="auto",
-        step=step,
-        precision=precision,
-        device=device,
-        tolerance=0.01 * rend.pixel_size,
+        step=setup.trace_options["step"],
+        precision=setup.trace_options["precision"],
+        device=setup.trace_options["device"],
+        tolerance=0.01 * setup.imaging.renderer.pixel_size,
     )
     logger.info(
         "auto: interp %s, estimated r' error %.2e (0.01 pixel = %.2e)",
@@ -753,40 +587,41 @@ def _reference_step(step, source):
     return default_step(probe)
 
 
-def _make_reference(
-    source,
-    scene,
-    cam,
-    rend,
-    key,
-    start_positions,
-    times,
-    frame_ids,
-    threshold,
-    centroid_weights,
-    timings,
-    batch,
-    device,
-    ref_step,
-    interp,
-    precision,
-    bar,
-):
+def make_reference(setup, bar=None):
+    """True tracks and the reference images (through a uniform medium) of every frame.
+
+    Parameters
+    ----------
+    setup : Setup
+    bar : tqdm progress bar, optional
+
+    Returns
+    -------
+    Reference
+    """
     start = time.perf_counter()
-    tracks, true_velocity, outside = _true_motion(source, scene, start_positions, times, frame_ids)
-    timings["track"] += time.perf_counter() - start
-    uniform = _uniform_like(source)
-    options = {"step": ref_step, "interp": interp, "precision": precision, "device": device}
-    ref = _Pass(len(frame_ids), len(start_positions), rend, threshold, centroid_weights, timings)
-    for f in range(len(frame_ids)):
-        _image_frame(ref, f, uniform, tracks[f], scene, cam, options, batch, bar=bar)
+    tracks, true_velocity, outside = _true_motion(
+        setup.source, setup.scene, setup.start_positions, setup.times, setup.frame_ids
+    )
+    setup.timings["track"] += time.perf_counter() - start
+    uniform = _uniform_like(setup.source)
+    reference_setup = dataclasses.replace(
+        setup,
+        trace_options={
+            **setup.trace_options,
+            "step": _reference_step(setup.trace_options["step"], setup.source),
+        },
+    )
+    ref = _Pass(len(setup.frame_ids), len(setup.start_positions))
+    for f in range(len(setup.frame_ids)):
+        _image_frame(reference_setup, ref, f, uniform, tracks[f], extras={"bar": bar})
     if ref.status_counts[0] == ref.vignetted:
         raise RimclError(
             "no ray of any tracer reaches the camera even through a uniform medium: "
             "check the camera geometry (distance, view angle, aperture) against the field"
         )
     return Reference(
-        key=key,
+        key=setup.key,
         tracks=tracks,
         true_velocity=true_velocity,
         outside=outside,
@@ -796,24 +631,29 @@ def _make_reference(
     )
 
 
-def _assemble(
-    config,
-    key,
-    reference,
-    measured,
-    sampler,
-    cam,
-    rend,
-    scene,
-    times,
-    dt,
-    case_name,
-    g,
-    delta_n_max,
-    timings,
-    canvas,
-    device,
-):
+def _kinematics(positions, true_velocity, flags, notes, dt):
+    """Velocity (2 frames) and acceleration (3 frames) tables of every position kind."""
+    frames, count = flags.shape
+    velocity = acceleration = None
+    if frames >= 2:
+        velocity = {"id": np.arange(count)}
+        for kind, track in positions.items():
+            u = true_velocity if kind == "true" else first_difference(track, dt)
+            velocity[f"u2_{kind}"], velocity[f"u3_{kind}"] = u[:, 0], u[:, 1]
+        velocity["flags"] = np.bitwise_or.reduce(flags[:2], axis=0)
+        velocity["notes"] = np.bitwise_or.reduce(notes[:2], axis=0)
+    if frames >= 3:
+        acceleration = {"id": np.arange(count)}
+        for kind, track in positions.items():
+            a = second_difference(track, dt)
+            acceleration[f"a2_{kind}"], acceleration[f"a3_{kind}"] = a[:, 0], a[:, 1]
+        acceleration["flags"] = np.bitwise_or.reduce(flags[:3], axis=0)
+        acceleration["notes"] = np.bitwise_or.reduce(notes[:3], axis=0)
+    return velocity, acceleration
+
+
+def _assemble(setup, config, reference, measured, sampler, delta_n_max):
+    """The output tables of one run (stage 4): positions, velocities, accelerations."""
     frames, count = reference.tracks.shape[:2]
     ref, meas = reference.images, measured.images
     truth_flags = np.where(reference.outside, int(TracerFlag.OUTSIDE_FIELD), 0)
@@ -823,73 +663,67 @@ def _assemble(
     def rows(values):
         return np.asarray(values).reshape(-1)
 
-    ids = np.tile(np.arange(count), frames)
+    camera, renderer, scene = setup.camera, setup.imaging.renderer, setup.scene
     tracers = {
-        "id": ids,
+        "id": np.tile(np.arange(count), frames),
         "frame": np.repeat(np.arange(frames), count),
-        "time": np.repeat(times, count),
+        "time": np.repeat(setup.times, count),
         "x2_true": rows(reference.tracks[..., 0]),
         "x3_true": rows(reference.tracks[..., 1]),
-        "x2_ref": rows(ref["x2"]),
-        "x3_ref": rows(ref["x3"]),
-        "x2_meas": rows(meas["x2"]),
-        "x3_meas": rows(meas["x3"]),
-        "area_ref": rows(ref["area"]),
-        "area_meas": rows(meas["area"]),
-        "perimeter_ref": rows(ref["perimeter"]),
-        "perimeter_meas": rows(meas["perimeter"]),
-        "circularity_ref": rows(ref["circularity"]),
-        "circularity_meas": rows(meas["circularity"]),
-        "n_rays": np.full(frames * count, cam.rays_per_tracer, dtype=np.int64),
-        "n_rays_ok": rows(meas["n_rays_ok"]),
-        "n_rays_ok_ref": rows(ref["n_rays_ok"]),
-        "peak_ref": rows(ref["peak"]),
-        "peak_meas": rows(meas["peak"]),
-        "flags": rows(flags),
-        "notes": rows(notes),
-        "flags_ref": rows(ref["flags"]),
-        "flags_meas": rows(meas["flags"]),
     }
+    for suffix, images in (("ref", ref), ("meas", meas)):
+        tracers[f"x2_{suffix}"] = rows(images["x2"])
+        tracers[f"x3_{suffix}"] = rows(images["x3"])
+    tracers.update(
+        {
+            "x2_opt": rows(meas["x2_opt"]),
+            "x3_opt": rows(meas["x3_opt"]),
+            "x2_opt_ref": rows(ref["x2_opt"]),
+            "x3_opt_ref": rows(ref["x3_opt"]),
+        }
+    )
+    for name in ("area", "perimeter", "circularity"):
+        tracers[f"{name}_ref"] = rows(ref[name])
+        tracers[f"{name}_meas"] = rows(meas[name])
+    tracers.update(
+        {
+            "n_rays": np.full(frames * count, camera.rays_per_tracer, dtype=np.int64),
+            "n_rays_ok": rows(meas["n_rays_ok"]),
+            "n_rays_ok_ref": rows(ref["n_rays_ok"]),
+            "peak_ref": rows(ref["peak"]),
+            "peak_meas": rows(meas["peak"]),
+            "flags": rows(flags),
+            "notes": rows(notes),
+            "flags_ref": rows(ref["flags"]),
+            "flags_meas": rows(meas["flags"]),
+        }
+    )
     positions = {
         "true": reference.tracks,
         "ref": np.stack([ref["x2"], ref["x3"]], axis=-1),
         "meas": np.stack([meas["x2"], meas["x3"]], axis=-1),
+        "opt": np.stack([meas["x2_opt"], meas["x3_opt"]], axis=-1),
+        "opt_ref": np.stack([ref["x2_opt"], ref["x3_opt"]], axis=-1),
     }
-    velocity = acceleration = None
-    if frames >= 2:
-        velocity = {"id": np.arange(count)}
-        truth = {"true": reference.true_velocity}
-        for kind in ("true", "ref", "meas"):
-            u = truth.get(kind)
-            u = first_difference(positions[kind], dt) if u is None else u
-            velocity[f"u2_{kind}"], velocity[f"u3_{kind}"] = u[:, 0], u[:, 1]
-        velocity["flags"] = np.bitwise_or.reduce(flags[:2], axis=0)
-        velocity["notes"] = np.bitwise_or.reduce(notes[:2], axis=0)
-    if frames >= 3:
-        acceleration = {"id": np.arange(count)}
-        for kind in ("true", "ref", "meas"):
-            a = second_difference(positions[kind], dt)
-            acceleration[f"a2_{kind}"], acceleration[f"a3_{kind}"] = a[:, 0], a[:, 1]
-        acceleration["flags"] = np.bitwise_or.reduce(flags[:3], axis=0)
-        acceleration["notes"] = np.bitwise_or.reduce(notes[:3], axis=0)
+    velocity, acceleration = _kinematics(positions, reference.true_velocity, flags, notes, setup.dt)
     attrs = {
         "rimcl_schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
-        "case": case_name,
-        "k_rho": g,
+        "case": config["case"],
+        "k_rho": config["k_rho"],
         "delta_n_max": delta_n_max,
         "length_L": scene.depth,
-        "pixel_size": rend.pixel_size,
-        "dt": dt,
+        "pixel_size": renderer.pixel_size,
+        "dt": setup.dt,
         "flag_names": json.dumps(flag_names()),
         "note_bits": int(NOTES),
         "n_tracers": count,
         "n_frames": frames,
-        "rays_per_tracer": cam.rays_per_tracer,
-        "renderer": rend.kind,
+        "rays_per_tracer": camera.rays_per_tracer,
+        "renderer": renderer.kind,
         "camera": config["camera"]["camera"],
         "threshold": config["render"]["threshold"],
-        "psf_sigma_px": rend.psf_sigma,
+        "psf_sigma_px": renderer.psf_sigma,
         "x_sheet": scene.x_sheet,
         "x_end": scene.x_end,
         "fov_lo": scene.fov_lo,
@@ -907,12 +741,12 @@ def _assemble(
         tracers=tracers,
         velocity=velocity,
         acceleration=acceleration,
-        rays=sampler.table(cam.rays_per_tracer),
+        rays=sampler.table(camera.rays_per_tracer),
         ray_attrs=ray_attrs,
         reference=reference,
-        timings=dict(timings),
-        frame_image=None if canvas is None else canvas.counts,
-        device=device,
+        timings=dict(setup.timings),
+        frame_image=None,
+        device=setup.trace_options["device"],
     )
 
 

@@ -9,6 +9,7 @@ import pytest
 
 from rimcl.camera import PupilCamera, Scene
 from rimcl.centroid import TracerFlag
+from rimcl.config import MeasureConfig
 from rimcl.errors import RimclError
 from rimcl.flow.fieldfile import write_field
 from rimcl.measure import run_render, write_frame_image, write_render
@@ -16,6 +17,14 @@ from rimcl.measure import run_render, write_frame_image, write_render
 TIMES = (0.0, 0.01, 0.02)
 OMEGA = 2.0  # solid-body rotation rate of the linear-medium file (rad per time unit)
 GRADIENT, N0 = 5e-3, 1.33  # linear medium n = N0 + GRADIENT (x2 - 1/2)
+
+
+def render(field, *, case=None, k_rho=None, reference=None, **options):
+    """run_render with the flat option names of ``rimcl render``."""
+    config = MeasureConfig.from_options(**options)
+    return run_render(field, case=case, k_rho=k_rho, reference=reference, config=config)
+
+
 SMALL = {"tracers": 6, "fan": 5, "pupil_rays": 25, "pixels": 1024}
 
 
@@ -68,9 +77,7 @@ def linear_file(tmp_path_factory):
 @pytest.mark.parametrize("camera", ["plane", "pupil"])
 @pytest.mark.parametrize("renderer", ["exact", "paper"])
 def test_zero_k_rho_measures_exactly_the_reference(blobs_file, device, renderer, camera):
-    result = run_render(
-        blobs_file, k_rho=0.0, renderer=renderer, camera=camera, device=device, **SMALL
-    )
+    result = render(blobs_file, k_rho=0.0, renderer=renderer, camera=camera, device=device, **SMALL)
     rows = result.tracers
     assert np.all(np.isfinite(rows["x2_ref"])) and np.all(rows["flags"] == 0)
     for name in ("x2", "x3", "area", "perimeter", "circularity"):
@@ -79,14 +86,14 @@ def test_zero_k_rho_measures_exactly_the_reference(blobs_file, device, renderer,
 
 
 def test_reference_is_reused_across_cases_and_checked(blobs_file, device):
-    fresh = run_render(blobs_file, case="C3", device=device, **SMALL)
-    reused = run_render(blobs_file, case="C3", device=device, reference=fresh.reference, **SMALL)
+    fresh = render(blobs_file, case="C3", device=device, **SMALL)
+    reused = render(blobs_file, case="C3", device=device, reference=fresh.reference, **SMALL)
     for name, values in fresh.tracers.items():
         np.testing.assert_array_equal(reused.tracers[name], values, err_msg=name)
-    zero = run_render(blobs_file, k_rho=0.0, device=device, reference=fresh.reference, **SMALL)
+    zero = render(blobs_file, k_rho=0.0, device=device, reference=fresh.reference, **SMALL)
     np.testing.assert_array_equal(zero.tracers["x2_meas"], zero.tracers["x2_ref"])
     with pytest.raises(RimclError, match="differs in: tracers"):
-        run_render(
+        render(
             blobs_file,
             case="C3",
             device=device,
@@ -116,7 +123,7 @@ def _linear_medium_image_shift(camera, tracers):
 
 def test_linear_medium_shift_matches_float64_rays(linear_file, device):
     settings = {"tracers": 4, "pupil_rays": 64, "pixels": 2048, "margin": 0.2}
-    result = run_render(
+    result = render(
         linear_file,
         camera="pupil",
         camera_distance=20.0,
@@ -139,7 +146,7 @@ def test_linear_medium_shift_matches_float64_rays(linear_file, device):
 
 
 def test_solid_body_rotation_truth(linear_file, device):
-    result = run_render(linear_file, tracers=40, fan=2, margin=0.2, device=device)
+    result = render(linear_file, tracers=40, fan=2, margin=0.2, device=device)
     rows = result.tracers
     start = np.stack([rows["x2_true"], rows["x3_true"]], axis=-1)[rows["frame"] == 0]
     offset = start - 0.5
@@ -164,8 +171,8 @@ def test_solid_body_rotation_truth(linear_file, device):
 
 
 def test_batches_do_not_change_the_result(blobs_file, device):
-    whole = run_render(blobs_file, case="C2", device=device, **SMALL)
-    pieces = run_render(blobs_file, case="C2", device=device, rays_per_batch=40, **SMALL)
+    whole = render(blobs_file, case="C2", device=device, **SMALL)
+    pieces = render(blobs_file, case="C2", device=device, rays_per_batch=40, **SMALL)
     for name, values in whole.tracers.items():
         np.testing.assert_array_equal(pieces.tracers[name], values, err_msg=name)
     for name, values in whole.rays.items():
@@ -175,7 +182,7 @@ def test_batches_do_not_change_the_result(blobs_file, device):
 def test_memory_is_flat_in_the_number_of_tracers(blobs_file, device):
     def peak(tracers):
         tracemalloc.start()
-        run_render(
+        render(
             blobs_file,
             case="C1",
             frames=1,
@@ -197,7 +204,7 @@ def test_memory_is_flat_in_the_number_of_tracers(blobs_file, device):
 
 
 def test_ray_sample_and_status_counts(blobs_file, device):
-    result = run_render(blobs_file, case="C4", device=device, ray_sample=50, **SMALL)
+    result = render(blobs_file, case="C4", device=device, ray_sample=50, **SMALL)
     rays = result.rays
     assert len(rays["theta0"]) == 50
     assert set(rays) >= {"theta0", "deflection", "n_metric", "path_length", "displacement"}
@@ -217,7 +224,7 @@ def test_ray_sample_and_status_counts(blobs_file, device):
 
 
 def test_write_render_file_layout(blobs_file, device, tmp_path):
-    result = run_render(blobs_file, case="C1", device=device, frame_image=True, **SMALL)
+    result = render(blobs_file, case="C1", device=device, frame_image=True, **SMALL)
     path = tmp_path / "render.h5"
     write_render(path, result)
     with h5py.File(path, "r") as h5:
@@ -259,8 +266,8 @@ def test_field_without_velocity_cannot_track(tmp_path, device):
         boundary="periodic",
     )
     with pytest.raises(RimclError, match="holds no velocity"):
-        run_render(path, case="C1", device=device, **SMALL)
-    single = run_render(path, case="C1", frames=1, device=device, **SMALL)
+        render(path, case="C1", device=device, **SMALL)
+    single = render(path, case="C1", frames=1, device=device, **SMALL)
     assert single.velocity is None and single.acceleration is None
 
 
@@ -278,13 +285,13 @@ def test_field_without_velocity_cannot_track(tmp_path, device):
 def test_bad_requests_rejected(blobs_file, kw, match):
     settings = {**SMALL, "case": "C1", **kw}
     with pytest.raises(RimclError, match=match):
-        run_render(blobs_file, **settings)
+        render(blobs_file, **settings)
 
 
 def test_pupil_that_collects_no_ray_is_an_error(linear_file, device):
     # seen from 80° off axis, every ray leaves the clamped field through its side
     with pytest.raises(RimclError, match="no ray"):
-        run_render(
+        render(
             linear_file,
             camera="pupil",
             view_angle=80.0,
