@@ -16,6 +16,7 @@ Output file (``rimcl_schema = "render"``, ``schema_version = 1``), written by
 """
 
 import dataclasses
+import itertools
 import json
 import logging
 import math
@@ -186,7 +187,9 @@ class Setup:
     dt : float
         Time between frames (NaN for one frame).
     start_positions : ndarray, shape (N, 2)
-        Tracers at the first frame.
+        Tracers at the first frame (those of the shard).
+    first_tracer : int
+        Index of the first of them among all tracers of the run.
     batch : int
         Tracers traced per batch.
     key : dict
@@ -204,9 +207,20 @@ class Setup:
     times: np.ndarray
     dt: float
     start_positions: np.ndarray
+    first_tracer: int
     batch: int
     key: dict
     timings: dict
+
+
+def _shard_range(shard, total):
+    """``(first, stop)`` tracer indices of a shard (None: all ``total`` tracers)."""
+    if shard is None:
+        return 0, total
+    first, stop = (int(v) for v in shard)
+    if not 0 <= first < stop <= total:
+        raise RimclError(f"a shard must be tracers first..stop within 0..{total}, got {shard}")
+    return first, stop
 
 
 def _frames_of(source, time_config):
@@ -228,7 +242,7 @@ def _frames_of(source, time_config):
     return frame_ids, times, dt
 
 
-def _setup(source, source_name, g, config, streams):
+def _setup(source, source_name, g, config, streams, shard):
     """Resolve the configuration against the field: scene, camera, imaging, tracers, key."""
     from rimcl.device import describe_device, select_device
 
@@ -239,12 +253,13 @@ def _setup(source, source_name, g, config, streams):
     camera = config.camera.build(scene)
     imaging = config.renderer.build(scene)
     device = select_device(config.run.device)
-    start_positions = seed_tracers(
+    every_tracer = seed_tracers(
         config.tracers.count,
         scene,
         np.random.default_rng(streams[0]),
         config.tracers.margin,
     )
+    first, stop = _shard_range(shard, len(every_tracer))
     integrator = config.integrator
     trace_options = {
         "step": integrator.step,
@@ -261,14 +276,15 @@ def _setup(source, source_name, g, config, streams):
         frame_ids=frame_ids,
         times=times,
         dt=dt,
-        start_positions=start_positions,
+        start_positions=every_tracer[first:stop],
+        first_tracer=first,
         batch=max(1, int(config.run.rays_per_batch) // camera.rays_per_tracer),
         key={},
         timings={"track": 0.0, "trace": 0.0, "render": 0.0, "centroid": 0.0},
     )
     calibration = None
     if integrator.interp == "auto":
-        calibration = _calibrate_interp(setup, g)
+        calibration = _calibrate_interp(setup, g, every_tracer)
         trace_options["interp"] = calibration["interp"]
     setup.key = {
         "field": source_name,
@@ -281,7 +297,8 @@ def _setup(source, source_name, g, config, streams):
         "frames": frame_ids,
         "times": times.tolist(),
         "scene": scene.describe(),
-        "tracers": len(start_positions),
+        "tracers": len(every_tracer),
+        "shard": [first, stop],
         "seed": int(config.tracers.seed),
         "margin": float(config.tracers.margin),
         "camera": camera.describe(),
@@ -346,7 +363,7 @@ def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None
         pass_.vignetted += int(np.count_nonzero(ok & ~collected))
         pass_.ray_steps += int(result.steps.sum())
         if extras.get("sampler") is not None:
-            extras["sampler"].take(ids[0] * rays, result, collected)
+            extras["sampler"].take((setup.first_tracer + ids[0]) * rays, result, collected)
         ok = ok.reshape(len(ids), rays)
         collected = collected.reshape(len(ids), rays)
         flags = np.where(ok.all(axis=1), 0, int(TracerFlag.RAYS_FAILED))
@@ -436,7 +453,9 @@ def _true_motion(source, scene, tracers, times, frame_ids):
     return tracks, velocity(tracers, times[0]), outside
 
 
-def run_render(field=None, *, case=None, k_rho=None, config=None, reference=None, progress=False):
+def run_render(
+    field=None, *, case=None, k_rho=None, config=None, reference=None, shard=None, progress=False
+):
     """Run the synthetic PTV measurement of one refractive-index case.
 
     The stages: resolve the configuration against the field (:class:`Setup`); the true
@@ -457,6 +476,9 @@ def run_render(field=None, *, case=None, k_rho=None, config=None, reference=None
         dataclasses' defaults).
     reference : Reference, optional
         From an earlier result with the same configuration: skips the reference pass.
+    shard : (int, int), optional
+        Measure only tracers ``first..stop-1`` of the run (the same tracers, rays and
+        numbers as in the whole run); :func:`merge_results` joins shards.
     progress : bool
         Show a progress bar.
 
@@ -469,7 +491,7 @@ def run_render(field=None, *, case=None, k_rho=None, config=None, reference=None
         source, source_name = _open_source(field, stack)
         case_name, g = _case_of(source, case, k_rho)
         streams = np.random.SeedSequence(int(config.tracers.seed)).spawn(2)
-        setup, calibration = _setup(source, source_name, g, config, streams)
+        setup, calibration = _setup(source, source_name, g, config, streams, shard)
         count = len(setup.start_positions)
         frames = len(setup.frame_ids)
         bar = _progress(progress, (frames if reference is not None else 2 * frames) * count)
@@ -483,7 +505,7 @@ def run_render(field=None, *, case=None, k_rho=None, config=None, reference=None
                     f"{', '.join(changed)})"
                 )
             sampler = _RaySampler(
-                count * setup.camera.rays_per_tracer,
+                config.tracers.count * setup.camera.rays_per_tracer,
                 config.run.ray_sample,
                 np.random.default_rng(streams[1]),
             )
@@ -541,7 +563,7 @@ def _measure(setup, g, reference, sampler, canvas, bar):
 CALIBRATION_TRACERS = 16
 
 
-def _calibrate_interp(setup, g):
+def _calibrate_interp(setup, g, positions):
     """Choose the interpolation for ``interp="auto"`` once, on the first measured frame.
 
     The tolerance is 0.01 pixel of this camera. Every batch, frame and the reference then
@@ -549,7 +571,7 @@ def _calibrate_interp(setup, g):
     """
     from rimcl.calibrate import calibrate
 
-    positions, camera = setup.start_positions, setup.camera
+    camera = setup.camera
     chosen = np.unique(np.linspace(0, len(positions) - 1, CALIBRATION_TRACERS).astype(int))
     origins = np.repeat(setup.scene.in_sheet(positions[chosen]), camera.rays_per_tracer, axis=0)
     directions = camera.directions(positions[chosen]).reshape(-1, 3)
@@ -631,19 +653,19 @@ def make_reference(setup, bar=None):
     )
 
 
-def _kinematics(positions, true_velocity, flags, notes, dt):
+def _kinematics(ids, positions, true_velocity, flags, notes, dt):
     """Velocity (2 frames) and acceleration (3 frames) tables of every position kind."""
-    frames, count = flags.shape
+    frames = len(flags)
     velocity = acceleration = None
     if frames >= 2:
-        velocity = {"id": np.arange(count)}
+        velocity = {"id": ids}
         for kind, track in positions.items():
             u = true_velocity if kind == "true" else first_difference(track, dt)
             velocity[f"u2_{kind}"], velocity[f"u3_{kind}"] = u[:, 0], u[:, 1]
         velocity["flags"] = np.bitwise_or.reduce(flags[:2], axis=0)
         velocity["notes"] = np.bitwise_or.reduce(notes[:2], axis=0)
     if frames >= 3:
-        acceleration = {"id": np.arange(count)}
+        acceleration = {"id": ids}
         for kind, track in positions.items():
             a = second_difference(track, dt)
             acceleration[f"a2_{kind}"], acceleration[f"a3_{kind}"] = a[:, 0], a[:, 1]
@@ -664,8 +686,9 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
         return np.asarray(values).reshape(-1)
 
     camera, renderer, scene = setup.camera, setup.imaging.renderer, setup.scene
+    ids = np.arange(setup.first_tracer, setup.first_tracer + count)
     tracers = {
-        "id": np.tile(np.arange(count), frames),
+        "id": np.tile(ids, frames),
         "frame": np.repeat(np.arange(frames), count),
         "time": np.repeat(setup.times, count),
         "x2_true": rows(reference.tracks[..., 0]),
@@ -705,7 +728,9 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
         "opt": np.stack([meas["x2_opt"], meas["x3_opt"]], axis=-1),
         "opt_ref": np.stack([ref["x2_opt"], ref["x3_opt"]], axis=-1),
     }
-    velocity, acceleration = _kinematics(positions, reference.true_velocity, flags, notes, setup.dt)
+    velocity, acceleration = _kinematics(
+        ids, positions, reference.true_velocity, flags, notes, setup.dt
+    )
     attrs = {
         "rimcl_schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
@@ -747,6 +772,84 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
         timings=dict(setup.timings),
         frame_image=None,
         device=setup.trace_options["device"],
+    )
+
+
+def _join_frames(parts, frames):
+    """Frame-major rows of shards ``(F * N_i,)`` joined into ``(F * sum N_i,)``."""
+    return np.concatenate([p.reshape(frames, -1) for p in parts], axis=1).reshape(-1)
+
+
+def merge_results(parts):
+    """Join the results of consecutive shards of one run into the whole run's result.
+
+    Parameters
+    ----------
+    parts : sequence of RenderResult
+        From :func:`run_render` with ``shard`` ranges that tile ``0..N`` in order.
+
+    Returns
+    -------
+    RenderResult
+        Equal, table by table, to the result of the unsharded run.
+    """
+    parts = list(parts)
+    first = parts[0]
+    frames = int(first.attrs["n_frames"])
+    ranges = [tuple(p.config["shard"]) for p in parts]
+    total = int(first.config["tracers"])
+    if (
+        ranges[0][0] != 0
+        or ranges[-1][1] != total
+        or any(a[1] != b[0] for a, b in itertools.pairwise(ranges))
+    ):
+        raise RimclError(f"shards {ranges} do not tile the {total} tracers in order")
+
+    def rows(name):
+        tables = [getattr(p, name) for p in parts]
+        if tables[0] is None:
+            return None
+        return {k: np.concatenate([t[k] for t in tables]) for k in tables[0]}
+
+    tracers = {k: _join_frames([p.tracers[k] for p in parts], frames) for k in first.tracers}
+    ray_attrs = dict(first.ray_attrs)
+    for name in ray_attrs:
+        if name != "sampled_from_frame":
+            ray_attrs[name] = sum(p.ray_attrs[name] for p in parts)
+    refs = [p.reference for p in parts]
+    key = {**refs[0].key, "shard": [0, total]}
+    reference = Reference(
+        key=key,
+        tracks=np.concatenate([r.tracks for r in refs], axis=1),
+        true_velocity=None
+        if refs[0].true_velocity is None
+        else np.concatenate([r.true_velocity for r in refs]),
+        outside=np.concatenate([r.outside for r in refs], axis=1),
+        images={k: np.concatenate([r.images[k] for r in refs], axis=1) for k in refs[0].images},
+        ray_counts={k: sum(r.ray_counts[k] for r in refs) for k in refs[0].ray_counts},
+        ray_steps=sum(r.ray_steps for r in refs),
+    )
+    frame_image = None
+    if first.frame_image is not None:
+        stacked = np.sum([p.frame_image.astype(np.int64) for p in parts], axis=0)
+        full_scale = int(first.config["render"]["full_scale"])
+        frame_image = np.minimum(stacked, full_scale).astype(np.uint16)
+    return RenderResult(
+        attrs={
+            **first.attrs,
+            "n_tracers": total,
+            "delta_n_max": max(p.attrs["delta_n_max"] for p in parts),
+        },
+        config={**first.config, "shard": [0, total]},
+        tracers=tracers,
+        velocity=rows("velocity"),
+        acceleration=rows("acceleration"),
+        rays=rows("rays"),
+        ray_attrs=ray_attrs,
+        reference=reference,
+        timings={k: sum(p.timings[k] for p in parts) for k in first.timings},
+        frame_image=frame_image,
+        device=first.device,
     )
 
 

@@ -12,7 +12,7 @@ from rimcl.centroid import TracerFlag
 from rimcl.config import MeasureConfig
 from rimcl.errors import RimclError
 from rimcl.flow.fieldfile import write_field
-from rimcl.measure import run_render, write_frame_image, write_render
+from rimcl.measure import merge_results, run_render, write_frame_image, write_render
 
 TIMES = (0.0, 0.01, 0.02)
 OMEGA = 2.0  # solid-body rotation rate of the linear-medium file (rad per time unit)
@@ -92,7 +92,7 @@ def test_reference_is_reused_across_cases_and_checked(blobs_file, device):
         np.testing.assert_array_equal(reused.tracers[name], values, err_msg=name)
     zero = render(blobs_file, k_rho=0.0, device=device, reference=fresh.reference, **SMALL)
     np.testing.assert_array_equal(zero.tracers["x2_meas"], zero.tracers["x2_ref"])
-    with pytest.raises(RimclError, match="differs in: tracers"):
+    with pytest.raises(RimclError, match="differs in: shard, tracers"):
         render(
             blobs_file,
             case="C3",
@@ -177,6 +177,23 @@ def test_batches_do_not_change_the_result(blobs_file, device):
         np.testing.assert_array_equal(pieces.tracers[name], values, err_msg=name)
     for name, values in whole.rays.items():
         np.testing.assert_array_equal(pieces.rays[name], values, err_msg=name)
+
+
+def test_shards_merge_into_the_whole_run(blobs_file, device):
+    config = MeasureConfig.from_options(device=device, frame_image=True, ray_sample=30, **SMALL)
+    whole = run_render(blobs_file, case="C3", config=config)
+    parts = [run_render(blobs_file, case="C3", config=config, shard=s) for s in ((0, 2), (2, 6))]
+    merged = merge_results(parts)
+    for group in ("tracers", "velocity", "acceleration", "rays"):
+        for name, values in getattr(whole, group).items():
+            np.testing.assert_array_equal(getattr(merged, group)[name], values, err_msg=name)
+    assert merged.ray_attrs == whole.ray_attrs
+    np.testing.assert_array_equal(merged.frame_image, whole.frame_image)
+    np.testing.assert_array_equal(merged.reference.images["scale"], whole.reference.images["scale"])
+    again = run_render(blobs_file, case="C1", config=config, reference=merged.reference)
+    assert again.attrs["n_tracers"] == SMALL["tracers"]
+    with pytest.raises(RimclError, match="do not tile"):
+        merge_results(parts[1:])
 
 
 def test_memory_is_flat_in_the_number_of_tracers(blobs_file, device):
