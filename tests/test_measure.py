@@ -80,6 +80,8 @@ def test_zero_k_rho_measures_exactly_the_reference(blobs_file, device, renderer,
     result = render(blobs_file, k_rho=0.0, renderer=renderer, camera=camera, device=device, **SMALL)
     rows = result.tracers
     assert np.all(np.isfinite(rows["x2_ref"])) and np.all(rows["flags"] == 0)
+    for name in ("x2_opt", "x3_opt"):
+        np.testing.assert_array_equal(rows[name], rows[f"{name}_ref"])
     for name in ("x2", "x3", "area", "perimeter", "circularity"):
         np.testing.assert_array_equal(rows[f"{name}_meas"], rows[f"{name}_ref"])
     np.testing.assert_array_equal(result.velocity["u2_meas"], result.velocity["u2_ref"])
@@ -143,6 +145,33 @@ def test_linear_medium_shift_matches_float64_rays(linear_file, device):
     np.testing.assert_allclose(rows["x2_meas"] - rows["x2_ref"], expected, rtol=0.02)
     # across the gradient nothing moves (each ray keeps its x3 image exactly)
     np.testing.assert_allclose(rows["x3_meas"], rows["x3_ref"], atol=0.01 * pixel)
+
+
+def test_slab_optics_error_is_the_closed_form_and_imaging_adds_little(linear_file, device):
+    """DESIGN §15: a uniform transverse gradient shifts every image point by
+    Δ = -L² (∂n/∂x2) / (2 n0); the optics mean carries it, the camera adds < 1 % at 16 bits."""
+    result = render(
+        linear_file,
+        camera="pupil",
+        camera_distance=20.0,
+        aperture_diameter=0.5,
+        frames=1,
+        tracers=6,
+        pupil_rays=64,
+        pixels=2048,
+        margin=0.2,
+        psf_sigma=2.0,
+        bit_depth=16,
+        threshold=2562.0,
+        device=device,
+    )
+    rows = result.tracers
+    closed_form = -(1.0**2) * GRADIENT / (2 * N0)
+    optics = rows["x2_opt"] - rows["x2_opt_ref"]
+    np.testing.assert_allclose(optics, closed_form, rtol=0.01)
+    np.testing.assert_allclose(rows["x2_opt_ref"], rows["x2_true"], rtol=0, atol=1e-12)
+    imaging = (rows["x2_meas"] - rows["x2_ref"]) - optics
+    assert np.all(np.abs(imaging) < 0.01 * abs(closed_form))
 
 
 def test_solid_body_rotation_truth(linear_file, device):
