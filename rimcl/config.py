@@ -92,6 +92,8 @@ class RendererConfig:
         Largest per-tracer window side (pixels).
     bit_depth : int
         Bits per pixel of the camera, 8 to 16 (paper: 10).
+    scaling : {"reference", "per_image"}
+        See :class:`rimcl.imaging.Imaging`.
     """
 
     kind: str = "exact"
@@ -101,6 +103,7 @@ class RendererConfig:
     centroid_weights: str = "excess"
     max_window: int = 512
     bit_depth: int = 10
+    scaling: str = "reference"
 
     def build(self, scene):
         """The :class:`rimcl.imaging.Imaging` of this camera over the scene's field of view."""
@@ -115,7 +118,7 @@ class RendererConfig:
             int(self.max_window),
             int(self.bit_depth),
         )
-        return Imaging(renderer, float(self.threshold), self.centroid_weights)
+        return Imaging(renderer, float(self.threshold), self.centroid_weights, self.scaling)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -212,6 +215,7 @@ RENDER_OPTIONS = {
     "centroid_weights": ("renderer", "centroid_weights"),
     "max_window": ("renderer", "max_window"),
     "bit_depth": ("renderer", "bit_depth"),
+    "scaling": ("renderer", "scaling"),
     "interp": ("integrator", "interp"),
     "precision": ("integrator", "precision"),
     "step": ("integrator", "step"),
@@ -225,6 +229,7 @@ RENDER_OPTIONS = {
     "rays_per_batch": ("run", "rays_per_batch"),
     "ray_sample": ("run", "ray_sample"),
     "frame_image": ("run", "frame_image"),
+    "box": (None, "box"),
     "x_sheet": (None, "x_sheet"),
     "depth": (None, "depth"),
 }
@@ -236,6 +241,8 @@ class MeasureConfig:
 
     Attributes
     ----------
+    box : sequence of 3 (lo, hi) pairs, optional
+        Measure in this box cut out of the field (clamped; :class:`rimcl.flow.crop.CroppedSource`).
     x_sheet, depth : float, optional
         Sheet position and traced depth ``L1`` (defaults: see
         :meth:`rimcl.camera.Scene.from_grid`).
@@ -243,6 +250,7 @@ class MeasureConfig:
         One object per stage.
     """
 
+    box: tuple = None
     x_sheet: float = None
     depth: float = None
     camera: CameraConfig = CameraConfig()
@@ -276,7 +284,9 @@ class MeasureConfig:
         field, cases, tracers = scene["field"], scene["cases"], scene["tracers"]
         camera, renderer = scene["camera"], scene["renderer"]
         integrator, run = scene["integrator"], scene["run"]
+        box = field["box"]
         return cls(
+            box=None if box is None else tuple(tuple(pair) for pair in box),
             x_sheet=field["x_sheet"],
             depth=field["depth"],
             camera=CameraConfig(
@@ -297,6 +307,7 @@ class MeasureConfig:
                 centroid_weights=renderer["centroid_weights"],
                 max_window=renderer["max_window"],
                 bit_depth=renderer["bit_depth"],
+                scaling=renderer["scale"],
             ),
             integrator=IntegratorConfig(
                 interp=integrator["interp"],
@@ -311,5 +322,6 @@ class MeasureConfig:
                 device=run["device"] or None,
                 rays_per_batch=run["rays_per_batch"],
                 ray_sample=run["ray_sample"],
+                engine=run["engine"],
             ),
         )

@@ -36,6 +36,7 @@ from rimcl.centroid import CENTROID_WEIGHTS, NO_POSITION, TracerFlag, locate, no
 from rimcl.errors import RimclError
 from rimcl.render import Renderer, quantize, scale_for
 
+SCALINGS = ("reference", "per_image")
 IMAGE_COLUMNS = {
     "x2": np.float64,
     "x3": np.float64,
@@ -71,11 +72,17 @@ class Imaging:
         Grey threshold in counts (pixels strictly above it belong to tracers).
     centroid_weights : {"excess", "grey"}
         See :mod:`rimcl.centroid`.
+    scaling : {"reference", "per_image"}
+        ``reference``: each tracer's measured image uses the scale of its reference image
+        (comparable images; DESIGN §6.3); ``per_image``: every image is scaled to its own
+        peak, as the paper "rescaled to a 10-bit dynamic range" (a distorted image then
+        keeps its full brightness and grows above the threshold).
     """
 
     renderer: Renderer
     threshold: float
     centroid_weights: str = "excess"
+    scaling: str = "reference"
 
     def __post_init__(self):
         if self.centroid_weights not in CENTROID_WEIGHTS:
@@ -83,6 +90,8 @@ class Imaging:
                 f"unknown centroid weights {self.centroid_weights!r}; "
                 f"choose from {CENTROID_WEIGHTS}"
             )
+        if self.scaling not in SCALINGS:
+            raise RimclError(f"unknown image scaling {self.scaling!r}; choose from {SCALINGS}")
         full_scale = self.renderer.full_scale
         if not (np.isfinite(self.threshold) and 0 <= self.threshold < full_scale):
             raise RimclError(
@@ -95,6 +104,7 @@ class Imaging:
             **self.renderer.describe(),
             "threshold": float(self.threshold),
             "centroid_weights": self.centroid_weights,
+            "scaling": self.scaling,
         }
 
 
@@ -135,7 +145,7 @@ def image_batch(imaging, points, usable, weights, flags, scales=None, timings=No
         Flags already known (failed or vignetted rays).
     scales : ndarray, shape (B,), optional
         Counts per unit of light of each tracer; None for the reference pass, which sets
-        them from its own images (peak → full scale).
+        them from its own images (peak → full scale). Ignored with ``per_image`` scaling.
     timings : dict, optional
         ``render`` and ``centroid`` seconds are added to it.
     canvas : rimcl.render.FrameImage, optional
@@ -154,9 +164,10 @@ def image_batch(imaging, points, usable, weights, flags, scales=None, timings=No
     out["n_rays_ok"][:] = usable.sum(axis=1)
     timings = {"render": 0.0, "centroid": 0.0} if timings is None else timings
     renderer = imaging.renderer
+    per_image = imaging.scaling == "per_image"
     for k in range(count):
         tracer_flags = TracerFlag(int(flags[k]))
-        scale = None if scales is None else float(scales[k])
+        scale = None if scales is None or per_image else float(scales[k])
         saturated = False
         if not usable[k].any():
             blob, window = not_found(tracer_flags | TracerFlag.NO_RAYS), None

@@ -31,6 +31,7 @@ from rimcl.centroid import EXCLUDING, NOTES, TracerFlag, flag_names
 from rimcl.config import MeasureConfig
 from rimcl.errors import RimclError
 from rimcl.field import Field
+from rimcl.flow.crop import CroppedSource
 from rimcl.imaging import Imaging, empty_columns, image_batch
 from rimcl.provenance import atomic_path, check_output, stamp_h5, to_json
 from rimcl.render import FrameImage
@@ -288,6 +289,7 @@ def _setup(source, source_name, g, config, streams, shard):
         trace_options["interp"] = calibration["interp"]
     setup.key = {
         "field": source_name,
+        "box": None if config.box is None else [list(pair) for pair in config.box],
         "grid": {
             "origin": np.asarray(source.origin).tolist(),
             "spacing": np.asarray(source.spacing).tolist(),
@@ -489,6 +491,8 @@ def run_render(
     config = MeasureConfig() if config is None else config
     with ExitStack() as stack:
         source, source_name = _open_source(field, stack)
+        if config.box is not None:
+            source = CroppedSource(source, config.box)
         case_name, g = _case_of(source, case, k_rho)
         streams = np.random.SeedSequence(int(config.tracers.seed)).spawn(2)
         setup, calibration = _setup(source, source_name, g, config, streams, shard)

@@ -38,8 +38,9 @@ class SceneKey:
     default : object
         Value when the key is absent; ``None`` for keys whose default is decided by the
         pipeline (the printed scene shows them commented out, with ``example``).
-    kind : {"str", "int", "float", "bool", "names", "thresholds"}
-        ``names``: a list of strings; ``thresholds``: a table of case name to number.
+    kind : {"str", "int", "float", "bool", "names", "thresholds", "box"}
+        ``names``: a list of strings; ``thresholds``: a table of case name to number;
+        ``box``: three ``[lo, hi]`` pairs.
     doc : str
         What the key means, with units.
     choices : tuple of str
@@ -70,6 +71,8 @@ class SceneKey:
 def _choices():
     from rimcl.camera import CAMERAS
     from rimcl.centroid import CENTROID_WEIGHTS
+    from rimcl.config import ENGINES
+    from rimcl.imaging import SCALINGS
     from rimcl.render import RENDERERS
     from rimcl.trace import INTERPOLATIONS, PRECISIONS
 
@@ -79,6 +82,8 @@ def _choices():
         "renderer": RENDERERS,
         "interp": INTERPOLATIONS,
         "precision": PRECISIONS,
+        "scale": SCALINGS,
+        "engine": ENGINES,
     }
 
 
@@ -116,6 +121,15 @@ def _keys():
             "traced depth L (field length units); default: the whole grid along x1",
             positive=True,
             example=3.0,
+        ),
+        SceneKey(
+            "field",
+            "box",
+            None,
+            "box",
+            "measure in this box cut out of the field, [[x1lo, x1hi], [x2lo, x2hi], "
+            "[x3lo, x3hi]] (field length units), clamped outside (the paper: a 512³ eighth)",
+            example=[[0.0, 3.141592653589793]] * 3,
         ),
         SceneKey(
             "cases",
@@ -267,6 +281,16 @@ def _keys():
         ),
         SceneKey(
             "renderer",
+            "scale",
+            "reference",
+            "str",
+            "reference: each measured image uses the scale of its tracer's reference image "
+            "(comparable images); per_image: every image scaled to its own peak, as the "
+            'paper "rescaled to a 10-bit dynamic range"',
+            choices=choice["scale"],
+        ),
+        SceneKey(
+            "renderer",
             "max_window",
             512,
             "int",
@@ -304,6 +328,14 @@ def _keys():
             "",
             "str",
             'OpenCL device (see "rimcl devices"); "" = $RIMCL_DEVICE, then a GPU, then a CPU',
+        ),
+        SceneKey(
+            "run",
+            "engine",
+            "numpy",
+            "str",
+            "where tracer images are rendered and located: numpy (the reference engine)",
+            choices=choice["engine"],
         ),
         SceneKey(
             "run",
@@ -420,6 +452,20 @@ def _check_value(key, value, where):
                 + _suggest(value, key.choices)
             )
         return value
+    if key.kind == "box":
+        pairs_ok = isinstance(value, list) and len(value) == 3
+        pairs_ok = pairs_ok and all(isinstance(p, list) and len(p) == 2 for p in value)
+        if not pairs_ok or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            for pair in value
+            for v in pair
+        ):
+            raise RimclError(
+                f"{name} must be three [lo, hi] pairs of numbers (x1, x2, x3), got {value!r}"
+            )
+        if any(lo >= hi for lo, hi in value):
+            raise RimclError(f"{name} needs lo < hi along every axis, got {value!r}")
+        return [[float(lo), float(hi)] for lo, hi in value]
     if key.kind == "bool":
         if not isinstance(value, bool):
             raise RimclError(f"{name} must be true or false, got {value!r}")
@@ -509,7 +555,30 @@ def validate_scene(raw, where="the scene"):
     return scene
 
 
-def load_scene(path=None, overrides=None):
+#: Named scenes (``rimcl study --preset NAME``): keys that differ from the defaults.
+PRESETS = {
+    # The paper's own setting (its §3.2): the 100 x 100 fan, nearest-pixel binning then a
+    # Gaussian filter, 8192 px over the traced box, a ~10 px tracer image (σ 2.3 px at a
+    # threshold of 100 of 1023), thresholds 100 (air-like) and 500 (water-like), every
+    # image rescaled to its own 10-bit range, on a π³ clamped eighth of the 2π sample
+    # (the paper traced a 512³ eighth of the 1024³ box).
+    "paper": {
+        "field": {"box": [[0.0, math.pi], [0.0, math.pi], [0.0, math.pi]]},
+        "cases": {"thresholds": {"C0": 100.0, "C1": 100.0, "C2": 100.0, "C3": 500.0, "C4": 500.0}},
+        "camera": {"kind": "plane", "fan": 100},
+        "renderer": {
+            "kind": "paper",
+            "pixels": 8192,
+            "psf_sigma": 2.3,
+            "threshold": 100.0,
+            "centroid_weights": "grey",
+            "scale": "per_image",
+        },
+    },
+}
+
+
+def load_scene(path=None, overrides=None, preset=None):
     """Read a scene file (or the defaults), apply overrides, check everything.
 
     Parameters
@@ -519,6 +588,8 @@ def load_scene(path=None, overrides=None):
     overrides : dict, optional
         ``{"section.key": value}`` applied on top (command-line options); ``None`` values
         are ignored.
+    preset : str, optional
+        A name of :data:`PRESETS`, applied under the file's keys.
 
     Returns
     -------
@@ -527,6 +598,11 @@ def load_scene(path=None, overrides=None):
     """
     raw = {}
     where = "the default scene"
+    if preset is not None:
+        if preset not in PRESETS:
+            raise RimclError(f"unknown preset {preset!r}; choose from {', '.join(PRESETS)}")
+        raw = copy.deepcopy(PRESETS[preset])
+        where = f"the {preset} preset"
     if path is not None:
         path = Path(path)
         where = str(path)
@@ -535,9 +611,14 @@ def load_scene(path=None, overrides=None):
         except OSError as exc:
             raise RimclError(f"cannot read scene file {path}: {exc.strerror}") from None
         try:
-            raw = tomllib.loads(text)
+            from_file = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise RimclError(f"{path} is not valid TOML: {exc}") from None
+        for section, table in from_file.items():
+            if isinstance(table, dict) and isinstance(raw.get(section), dict):
+                raw[section] = {**raw[section], **table}
+            else:
+                raw[section] = table
         field_path = (
             raw.get("field", {}).get("path") if isinstance(raw.get("field"), dict) else None
         )
@@ -549,6 +630,14 @@ def load_scene(path=None, overrides=None):
             continue
         section, name = dotted.split(".", 1)
         raw.setdefault(section, {})[name] = value
+    if preset is not None:
+        # the preset's thresholds cover every paper case; keep those of the cases run
+        names = raw.get("cases", {}).get("names", default_scene()["cases"]["names"])
+        preset_thresholds = PRESETS[preset].get("cases", {}).get("thresholds", {})
+        thresholds = raw.get("cases", {}).get("thresholds", {})
+        for case in set(preset_thresholds) - set(names):
+            if thresholds.get(case) == preset_thresholds[case]:
+                del thresholds[case]
     return validate_scene(raw, where)
 
 
