@@ -259,8 +259,9 @@ def track_acceleration(velocity, positions, times, step=None):
     times : array_like, shape (F,)
     step : float, optional
         ``h`` (time units). Default :data:`ACCELERATION_STEP` times the smallest spacing of
-        ``velocity.times`` (or of ``times``): the error is then ``O(h²)``, about 1e-7 of
-        ``|a|`` on flows that change over a frame spacing, far above round-off.
+        ``velocity.times`` (or of ``times``): the ``O(h²)`` error is then negligible, and
+        the round-off of ``u`` over ``h`` stays small (5e-9 of ``|a|`` for a solid-body
+        rotation on a FITPACK spline, whose ``u`` carries 1e-13 of round-off).
 
     Returns
     -------
