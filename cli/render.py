@@ -96,10 +96,26 @@ from rimcl.cli.options import (
 @step_option
 @click.option(
     "--frames",
-    type=click.IntRange(1, 3),
+    type=click.IntRange(1, 1000),
     default=3,
     show_default=True,
-    help="1: positions; 2: + velocity; 3: + acceleration.",
+    help="Frames imaged; 1: positions; 2: + velocity; 3 or more: + acceleration.",
+)
+@click.option(
+    "--dt",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Time between imaged frames [default: the field's frame spacing].",
+)
+@click.option(
+    "--fit-window",
+    type=click.IntRange(min=3),
+    default=5,
+    show_default=True,
+    help="Frames of the sliding polynomial fit of each track (odd).",
+)
+@click.option(
+    "--fit-order", type=click.IntRange(min=2), default=2, show_default=True, help="Fit order."
 )
 @click.option("--start-frame", default=0, show_default=True, help="First field frame used.")
 @click.option(

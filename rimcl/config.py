@@ -18,6 +18,7 @@ from rimcl.render import Renderer
 DEFAULT_RAYS_PER_BATCH = 1 << 17  # rays traced per batch: ~40 MB of host memory
 DEFAULT_RAY_SAMPLE = 20_000
 ENGINES = ("numpy",)
+MAX_FRAMES = 1000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -157,17 +158,40 @@ class TracerConfig:
 
 @dataclasses.dataclass(frozen=True)
 class TimeConfig:
-    """Frames imaged: ``frames`` consecutive stored frames from ``start_frame``.
+    """Frames imaged and how velocity and acceleration are estimated from them.
 
-    1 frame gives positions, 2 add velocity, 3 add acceleration.
+    Attributes
+    ----------
+    frames : int
+        Frames imaged, ``dt`` apart from stored frame ``start_frame``: 1 gives positions,
+        2 velocity, 3 or more acceleration.
+    start_frame : int
+        Stored frame of the first imaged frame (time ``t_0``).
+    dt : float, optional
+        Time between imaged frames (time units); default the stored spacing. A time
+        between stored frames is interpolated in time (:meth:`FieldFile.field_at`).
+    fit_window, fit_order : int
+        The sliding polynomial fit of the tracks (as Lagrangian PTV codes do): odd window
+        of frames and polynomial order; fitted estimates need ``frames >= fit_window``.
     """
 
     frames: int = 3
     start_frame: int = 0
+    dt: float = None
+    fit_window: int = 5
+    fit_order: int = 2
 
     def __post_init__(self):
-        if int(self.frames) not in (1, 2, 3):
-            raise RimclError(f"frames must be 1, 2 or 3, got {self.frames}")
+        if not 1 <= int(self.frames) <= MAX_FRAMES:
+            raise RimclError(f"frames must be 1 to {MAX_FRAMES}, got {self.frames}")
+        if self.dt is not None and not (isinstance(self.dt, numbers.Real) and self.dt > 0):
+            raise RimclError(f"the frame spacing dt must be a positive number, got {self.dt!r}")
+        window, order = int(self.fit_window), int(self.fit_order)
+        if order < 2 or window < 3 or window % 2 == 0 or window <= order:
+            raise RimclError(
+                "the fit window must be an odd number of frames, at least 3 and more than "
+                f"the fit order (at least 2); got window {self.fit_window}, order {self.fit_order}"
+            )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -224,6 +248,9 @@ RENDER_OPTIONS = {
     "margin": ("tracers", "margin"),
     "frames": ("time", "frames"),
     "start_frame": ("time", "start_frame"),
+    "dt": ("time", "dt"),
+    "fit_window": ("time", "fit_window"),
+    "fit_order": ("time", "fit_order"),
     "device": ("run", "device"),
     "engine": ("run", "engine"),
     "rays_per_batch": ("run", "rays_per_batch"),
@@ -317,7 +344,13 @@ class MeasureConfig:
             tracers=TracerConfig(
                 count=tracers["count"], seed=tracers["seed"], margin=tracers["margin"]
             ),
-            time=TimeConfig(frames=3, start_frame=field["start_frame"]),
+            time=TimeConfig(
+                frames=scene["time"]["frames"],
+                start_frame=field["start_frame"],
+                dt=scene["time"]["dt"],
+                fit_window=scene["time"]["fit_window"],
+                fit_order=scene["time"]["fit_order"],
+            ),
             run=RunConfig(
                 device=run["device"] or None,
                 rays_per_batch=run["rays_per_batch"],

@@ -36,7 +36,14 @@ from rimcl.imaging import Imaging, empty_columns, image_batch
 from rimcl.provenance import atomic_path, check_output, stamp_h5, to_json
 from rimcl.render import FrameImage
 from rimcl.trace import STATUS_NAMES, default_step, trace_rays
-from rimcl.track import SheetVelocity, first_difference, integrate_tracks, second_difference
+from rimcl.track import (
+    SheetVelocity,
+    integrate_tracks,
+    second_differences,
+    sliding_fit,
+    track_acceleration,
+    track_velocity,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -55,8 +62,9 @@ class Reference:
         The configuration it was made for (compared when it is reused).
     tracks : ndarray, shape (F, N, 2)
         True tracer positions ``(x2, x3)`` at each frame.
-    true_velocity : ndarray, shape (N, 2) or None
-        Flow velocity ``(u2, u3)`` at ``(x_0, t_0)``; None for a single frame.
+    true_velocity, true_acceleration : ndarray, shape (F, N, 2) or None
+        Flow velocity ``u(x_k, t_k)`` and Lagrangian acceleration ``Du/Dt`` along the true
+        tracks at each frame; None for a single frame.
     outside : ndarray, bool, shape (F, N)
         True positions outside the velocity grid (clamped fields only).
     images : dict of str to ndarray (F, N)
@@ -71,6 +79,7 @@ class Reference:
     key: dict
     tracks: np.ndarray
     true_velocity: np.ndarray
+    true_acceleration: np.ndarray
     outside: np.ndarray
     images: dict
     ray_counts: dict
@@ -89,8 +98,10 @@ class RenderResult:
         The full configuration (recorded with versions and device).
     tracers : dict of str to ndarray
         One row per tracer and frame (frame-major: all tracers of frame 0 first).
-    velocity, acceleration : dict of str to ndarray, or None
-        One row per tracer; None with fewer than 2 (3) frames.
+    kinematics : dict of str to (dict of str to ndarray, or None)
+        The tables ``velocity``, ``acceleration`` (the paper's differences),
+        ``velocity_fit`` and ``acceleration_fit`` (sliding polynomial fit): one row per
+        tracer and evaluation frame, frame-major; None where the run has too few frames.
     rays : dict of str to ndarray
         A random subsample of the measured rays of the first frame.
     ray_attrs : dict
@@ -107,8 +118,7 @@ class RenderResult:
     attrs: dict
     config: dict
     tracers: dict
-    velocity: dict
-    acceleration: dict
+    kinematics: dict
     rays: dict
     ray_attrs: dict
     reference: Reference
@@ -142,10 +152,12 @@ def _case_of(source, case, k_rho):
     return resolve_k_rho(case, k_rho)
 
 
-def _load_frame(source, frame, k_rho):
-    if math.isnan(k_rho):
-        return source.field(frame)
-    return source.field(frame, k_rho)
+def _load_frame(source, frame, time, k_rho):
+    """The field of a stored frame, or interpolated in time when ``frame`` is None."""
+    arguments = () if math.isnan(k_rho) else (k_rho,)
+    if frame is None:
+        return source.field_at(time, *arguments)
+    return source.field(frame, *arguments)
 
 
 def _uniform_like(source):
@@ -182,8 +194,9 @@ class Setup:
     imaging : rimcl.imaging.Imaging
     trace_options : dict
         ``interp``, ``precision``, ``step`` and ``device`` for :func:`rimcl.trace_rays`.
-    frame_ids : list of int
-        Stored frames imaged.
+    frame_ids : list of int or None
+        Stored frames imaged (None: interpolated in time).
+    time : rimcl.config.TimeConfig
     times : ndarray, shape (F,)
     dt : float
         Time between frames (NaN for one frame).
@@ -205,6 +218,7 @@ class Setup:
     imaging: Imaging
     trace_options: dict
     frame_ids: list
+    time: object
     times: np.ndarray
     dt: float
     start_positions: np.ndarray
@@ -225,21 +239,54 @@ def _shard_range(shard, total):
 
 
 def _frames_of(source, time_config):
-    """Frame indices, their times and the spacing, checked against the file."""
+    """Frames imaged: stored frame indices (None where interpolated), times and spacing.
+
+    Frame ``k`` is at ``t_0 + k Δt``, ``t_0`` the time of stored frame ``start_frame`` and
+    ``Δt`` the configured spacing (default: the stored spacing there). A time that is a
+    stored frame's (to 1e-9 of ``Δt``) uses it; another is interpolated in time.
+    """
     frames, start_frame = int(time_config.frames), int(time_config.start_frame)
-    frame_ids = list(range(start_frame, start_frame + frames))
-    if start_frame < 0 or frame_ids[-1] >= source.n_frames:
+    stored = np.asarray(source.times, dtype=np.float64)
+    if not 0 <= start_frame < len(stored):
         raise RimclError(
-            f"{frames} frames from frame {start_frame} need frames up to {frame_ids[-1]}, "
-            f"but the field has {source.n_frames} (0..{source.n_frames - 1})"
+            f"the start frame {start_frame} is not in the field (frames 0..{len(stored) - 1})"
         )
-    times = np.asarray(source.times, dtype=np.float64)[frame_ids]
-    dt = float(times[1] - times[0]) if frames > 1 else float("nan")
-    if frames == 3 and not math.isclose(times[2] - times[1], dt, rel_tol=1e-6):
+    if time_config.dt is not None:
+        dt = float(time_config.dt)
+    elif frames > 1:
+        if start_frame + 1 >= len(stored):
+            raise RimclError(
+                f"{frames} frames from frame {start_frame} need frames up to "
+                f"{start_frame + frames - 1}, but the field has {len(stored)} "
+                f"(0..{len(stored) - 1})"
+            )
+        dt = float(stored[start_frame + 1] - stored[start_frame])
+    else:
+        dt = float("nan")
+    times = stored[start_frame] + dt * np.arange(frames) if frames > 1 else stored[[start_frame]]
+    slack = 1e-9 * (abs(dt) if frames > 1 else 1.0)
+    if times[-1] > stored[-1] + slack:
         raise RimclError(
-            f"frames {frame_ids} are not equally spaced in time ({times.tolist()}); "
-            "the second difference needs equal spacing"
+            f"{frames} frames {dt:g} apart from t = {times[0]:g} need the field up to "
+            f"t = {times[-1]:g}, but it ends at t = {stored[-1]:g} "
+            f"({len(stored)} frames, 0..{len(stored) - 1})"
         )
+    nearest = np.clip(np.searchsorted(stored, times), 0, len(stored) - 1)
+    frame_ids = []
+    for t, j in zip(times, nearest, strict=True):
+        candidates = [i for i in (j - 1, j) if 0 <= i < len(stored)]
+        match = [i for i in candidates if abs(stored[i] - t) <= slack]
+        frame_ids.append(int(match[0]) if match else None)
+    if frames > 1:
+        times = np.array(
+            [stored[f] if f is not None else t for f, t in zip(frame_ids, times, strict=True)]
+        )
+        spacing = np.diff(times)
+        if not np.allclose(spacing, dt, rtol=1e-6, atol=0):
+            raise RimclError(
+                f"frames {frame_ids} are not equally spaced in time ({times.tolist()}); "
+                "differences and fits need equal spacing"
+            )
     return frame_ids, times, dt
 
 
@@ -275,6 +322,7 @@ def _setup(source, source_name, g, config, streams, shard):
         imaging=imaging,
         trace_options=trace_options,
         frame_ids=frame_ids,
+        time=config.time,
         times=times,
         dt=dt,
         start_positions=every_tracer[first:stop],
@@ -437,22 +485,29 @@ def _progress(enabled, total):
     return tqdm(total=total, unit="tracer", desc="render", disable=None)
 
 
-def _true_motion(source, scene, tracers, times, frame_ids):
-    """True tracks ``(F, N, 2)``, velocity at ``(x_0, t_0)`` and the outside-grid mask."""
+def _true_motion(source, scene, tracers, times):
+    """True tracks ``(F, N, 2)``, velocity and acceleration along them (``(F, N, 2)`` each,
+    None for one frame) and the outside-grid mask ``(F, N)``."""
     if len(times) == 1:
-        return tracers[None], None, np.zeros((1, len(tracers)), dtype=bool)
+        return tracers[None], None, None, np.zeros((1, len(tracers)), dtype=bool)
     if not source.has_velocity:
         raise RimclError(
             f"{getattr(source, 'path', 'the field')} holds no velocity, which tracking the "
             "tracers over several frames needs (use --frames 1 for positions only)"
         )
-    planes = [source.sheet_velocity(source.times[f], scene.x_sheet) for f in frame_ids]
-    velocity = SheetVelocity(
-        planes, times, source.origin[1:], source.spacing[1:], source.boundary == "periodic"
-    )
-    tracks = integrate_tracks(velocity, tracers, times, TRACKING_SUBSTEPS)
+    velocity = SheetVelocity.from_source(source, scene.x_sheet, times[0], times[-1])
+    stored_spacing = float(np.min(np.diff(velocity.times))) if len(velocity.times) > 1 else 0
+    substeps = TRACKING_SUBSTEPS
+    if stored_spacing > 0:
+        # RK4 steps no longer than the reference's 1/8 of the stored spacing
+        substeps = max(
+            substeps, math.ceil(TRACKING_SUBSTEPS * (times[1] - times[0]) / stored_spacing)
+        )
+    tracks = integrate_tracks(velocity, tracers, times, substeps)
     outside = np.stack([~velocity.inside(p) for p in tracks])
-    return tracks, velocity(tracers, times[0]), outside
+    true_velocity = track_velocity(velocity, tracks, times)
+    true_acceleration = track_acceleration(velocity, tracks, times)
+    return tracks, true_velocity, true_acceleration, outside
 
 
 def run_render(
@@ -545,7 +600,7 @@ def _measure(setup, g, reference, sampler, canvas, bar):
     measured = _Pass(len(setup.frame_ids), len(setup.start_positions))
     delta_n_max = 0.0
     for f, frame in enumerate(setup.frame_ids):
-        field = _load_frame(setup.source, frame, g)
+        field = _load_frame(setup.source, frame, setup.times[f], g)
         delta_n_max = max(delta_n_max, field.delta_n_range)
         extras = {"bar": bar}
         if f == 0:
@@ -580,7 +635,7 @@ def _calibrate_interp(setup, g, positions):
     origins = np.repeat(setup.scene.in_sheet(positions[chosen]), camera.rays_per_tracer, axis=0)
     directions = camera.directions(positions[chosen]).reshape(-1, 3)
     record = calibrate(
-        _load_frame(setup.source, setup.frame_ids[0], g),
+        _load_frame(setup.source, setup.frame_ids[0], setup.times[0], g),
         origins,
         directions,
         x_end=setup.scene.x_end,
@@ -626,8 +681,8 @@ def make_reference(setup, bar=None):
     Reference
     """
     start = time.perf_counter()
-    tracks, true_velocity, outside = _true_motion(
-        setup.source, setup.scene, setup.start_positions, setup.times, setup.frame_ids
+    tracks, true_velocity, true_acceleration, outside = _true_motion(
+        setup.source, setup.scene, setup.start_positions, setup.times
     )
     setup.timings["track"] += time.perf_counter() - start
     uniform = _uniform_like(setup.source)
@@ -650,6 +705,7 @@ def make_reference(setup, bar=None):
         key=setup.key,
         tracks=tracks,
         true_velocity=true_velocity,
+        true_acceleration=true_acceleration,
         outside=outside,
         images=ref.images,
         ray_counts=ref.counts(),
@@ -657,25 +713,75 @@ def make_reference(setup, bar=None):
     )
 
 
-def _kinematics(ids, positions, true_velocity, flags, notes, dt):
-    """Velocity (2 frames) and acceleration (3 frames) tables of every position kind."""
+def _frame_rows(ids, frames_used, columns, flags, notes, window):
+    """One table of per-tracer estimates at evaluation frames, frame-major.
+
+    ``columns`` maps a name to an ``(M, N)`` array over the ``M`` evaluation frames
+    ``frames_used``; each row's flags and notes are the union over the ``window`` frames
+    its estimate uses, starting at ``frames_used - offset`` (see :func:`_kinematics`).
+    """
+    frames_used = np.asarray(frames_used)
+    first_frames, span = window
+    union = np.stack([np.bitwise_or.reduce(flags[f : f + span], axis=0) for f in first_frames])
+    union_notes = np.stack(
+        [np.bitwise_or.reduce(notes[f : f + span], axis=0) for f in first_frames]
+    )
+    count = len(ids)
+    table = {
+        "id": np.tile(ids, len(frames_used)),
+        "frame": np.repeat(frames_used, count),
+    }
+    table.update({name: values.reshape(-1) for name, values in columns.items()})
+    table["flags"] = union.reshape(-1)
+    table["notes"] = union_notes.reshape(-1)
+    return table
+
+
+def _kinematics(ids, positions, truth, flags, notes, dt, time_config):
+    """Velocity and acceleration tables of every position kind (DESIGN §6.6, §13).
+
+    ``velocity``: the paper's forward difference ``(x_{k+1} - x_k)/Δt`` at frames
+    ``0 … F-2``, truth ``u(x_k, t_k)``; ``acceleration``: the second difference at frames
+    ``1 … F-2``, truth the same difference of the true positions (the paper's);
+    ``velocity_fit``, ``acceleration_fit``: a sliding polynomial fit over ``fit_window``
+    frames at each window centre, truth ``u`` and ``Du/Dt`` there. Tables a run has too
+    few frames for are None.
+    """
     frames = len(flags)
-    velocity = acceleration = None
+    measured = {k: v for k, v in positions.items() if k != "true"}
+    tables = dict.fromkeys(("velocity", "acceleration", "velocity_fit", "acceleration_fit"))
     if frames >= 2:
-        velocity = {"id": ids}
-        for kind, track in positions.items():
-            u = true_velocity if kind == "true" else first_difference(track, dt)
-            velocity[f"u2_{kind}"], velocity[f"u3_{kind}"] = u[:, 0], u[:, 1]
-        velocity["flags"] = np.bitwise_or.reduce(flags[:2], axis=0)
-        velocity["notes"] = np.bitwise_or.reduce(notes[:2], axis=0)
+        columns = {}
+        for kind, track in measured.items():
+            u = (track[1:] - track[:-1]) / dt
+            columns[f"u2_{kind}"], columns[f"u3_{kind}"] = u[..., 0], u[..., 1]
+        u = truth["velocity"][:-1]
+        columns["u2_true"], columns["u3_true"] = u[..., 0], u[..., 1]
+        used = np.arange(frames - 1)
+        tables["velocity"] = _frame_rows(ids, used, columns, flags, notes, (used, 2))
     if frames >= 3:
-        acceleration = {"id": ids}
+        columns = {}
         for kind, track in positions.items():
-            a = second_difference(track, dt)
-            acceleration[f"a2_{kind}"], acceleration[f"a3_{kind}"] = a[:, 0], a[:, 1]
-        acceleration["flags"] = np.bitwise_or.reduce(flags[:3], axis=0)
-        acceleration["notes"] = np.bitwise_or.reduce(notes[:3], axis=0)
-    return velocity, acceleration
+            a = second_differences(track, dt)
+            columns[f"a2_{kind}"], columns[f"a3_{kind}"] = a[..., 0], a[..., 1]
+        used = np.arange(1, frames - 1)
+        tables["acceleration"] = _frame_rows(ids, used, columns, flags, notes, (used - 1, 3))
+    window, order = int(time_config.fit_window), int(time_config.fit_order)
+    if frames >= window:
+        u_columns, a_columns = {}, {}
+        centres = None
+        for kind, track in measured.items():
+            fit = sliding_fit(track, dt, window, order)
+            centres = fit.centres
+            u_columns[f"u2_{kind}"], u_columns[f"u3_{kind}"] = fit.velocity.transpose(2, 0, 1)
+            a_columns[f"a2_{kind}"], a_columns[f"a3_{kind}"] = fit.acceleration.transpose(2, 0, 1)
+        u, a = truth["velocity"][centres], truth["acceleration"][centres]
+        u_columns["u2_true"], u_columns["u3_true"] = u[..., 0], u[..., 1]
+        a_columns["a2_true"], a_columns["a3_true"] = a[..., 0], a[..., 1]
+        span = (centres - window // 2, window)
+        tables["velocity_fit"] = _frame_rows(ids, centres, u_columns, flags, notes, span)
+        tables["acceleration_fit"] = _frame_rows(ids, centres, a_columns, flags, notes, span)
+    return tables
 
 
 def _assemble(setup, config, reference, measured, sampler, delta_n_max):
@@ -732,9 +838,12 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
         "opt": np.stack([meas["x2_opt"], meas["x3_opt"]], axis=-1),
         "opt_ref": np.stack([ref["x2_opt"], ref["x3_opt"]], axis=-1),
     }
-    velocity, acceleration = _kinematics(
-        ids, positions, reference.true_velocity, flags, notes, setup.dt
-    )
+    truth = {"velocity": reference.true_velocity, "acceleration": reference.true_acceleration}
+    kinematics = _kinematics(ids, positions, truth, flags, notes, setup.dt, setup.time)
+    if reference.true_velocity is not None:
+        for name, values in (("u", reference.true_velocity), ("a", reference.true_acceleration)):
+            tracers[f"{name}2_true"] = rows(values[..., 0])
+            tracers[f"{name}3_true"] = rows(values[..., 1])
     attrs = {
         "rimcl_schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
@@ -768,8 +877,7 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
         attrs=attrs,
         config=config,
         tracers=tracers,
-        velocity=velocity,
-        acceleration=acceleration,
+        kinematics=kinematics,
         rays=sampler.table(camera.rays_per_tracer),
         ray_attrs=ray_attrs,
         reference=reference,
@@ -809,11 +917,11 @@ def merge_results(parts):
     ):
         raise RimclError(f"shards {ranges} do not tile the {total} tracers in order")
 
-    def rows(name):
-        tables = [getattr(p, name) for p in parts]
+    def rows(tables):
         if tables[0] is None:
             return None
-        return {k: np.concatenate([t[k] for t in tables]) for k in tables[0]}
+        evaluated = len(np.unique(tables[0]["frame"]))
+        return {k: _join_frames([t[k] for t in tables], evaluated) for k in tables[0]}
 
     tracers = {k: _join_frames([p.tracers[k] for p in parts], frames) for k in first.tracers}
     ray_attrs = dict(first.ray_attrs)
@@ -827,7 +935,10 @@ def merge_results(parts):
         tracks=np.concatenate([r.tracks for r in refs], axis=1),
         true_velocity=None
         if refs[0].true_velocity is None
-        else np.concatenate([r.true_velocity for r in refs]),
+        else np.concatenate([r.true_velocity for r in refs], axis=1),
+        true_acceleration=None
+        if refs[0].true_acceleration is None
+        else np.concatenate([r.true_acceleration for r in refs], axis=1),
         outside=np.concatenate([r.outside for r in refs], axis=1),
         images={k: np.concatenate([r.images[k] for r in refs], axis=1) for k in refs[0].images},
         ray_counts={k: sum(r.ray_counts[k] for r in refs) for k in refs[0].ray_counts},
@@ -846,9 +957,8 @@ def merge_results(parts):
         },
         config={**first.config, "shard": [0, total]},
         tracers=tracers,
-        velocity=rows("velocity"),
-        acceleration=rows("acceleration"),
-        rays=rows("rays"),
+        kinematics={k: rows([p.kinematics[k] for p in parts]) for k in first.kinematics},
+        rays={k: np.concatenate([p.rays[k] for p in parts]) for k in first.rays},
         ray_attrs=ray_attrs,
         reference=reference,
         timings={k: sum(p.timings[k] for p in parts) for k in first.timings},
@@ -879,12 +989,7 @@ def write_render(path, result, overwrite=False):
             h5.attrs[name] = value
         stamp_h5(h5, result.config, result.device)
         h5.attrs["timings_s"] = to_json(result.timings)
-        groups = {
-            "tracers": result.tracers,
-            "velocity": result.velocity,
-            "acceleration": result.acceleration,
-            "rays": result.rays,
-        }
+        groups = {"tracers": result.tracers, **result.kinematics, "rays": result.rays}
         for group_name, table in groups.items():
             if table is None:
                 continue

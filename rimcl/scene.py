@@ -38,9 +38,9 @@ class SceneKey:
     default : object
         Value when the key is absent; ``None`` for keys whose default is decided by the
         pipeline (the printed scene shows them commented out, with ``example``).
-    kind : {"str", "int", "float", "bool", "names", "thresholds", "box"}
+    kind : {"str", "int", "float", "bool", "names", "thresholds", "box", "ints"}
         ``names``: a list of strings; ``thresholds``: a table of case name to number;
-        ``box``: three ``[lo, hi]`` pairs.
+        ``box``: three ``[lo, hi]`` pairs; ``ints``: a list of whole numbers >= 1.
     doc : str
         What the key means, with units.
     choices : tuple of str
@@ -102,7 +102,7 @@ def _keys():
             "start_frame",
             0,
             "int",
-            "first of the three consecutive frames used (time t0)",
+            "stored frame of the first imaged frame (time t0)",
             minimum=0,
         ),
         SceneKey(
@@ -130,6 +130,42 @@ def _keys():
             "measure in this box cut out of the field, [[x1lo, x1hi], [x2lo, x2hi], "
             "[x3lo, x3hi]] (field length units), clamped outside (the paper: a 512³ eighth)",
             example=[[0.0, 3.141592653589793]] * 3,
+        ),
+        SceneKey(
+            "time",
+            "frames",
+            5,
+            "int",
+            "frames imaged, time.dt apart (3: the paper; more for fitted tracks)",
+            positive=True,
+        ),
+        SceneKey(
+            "time",
+            "dt",
+            None,
+            "float",
+            "time between imaged frames; default: the field's frame spacing (0.02 on the "
+            "sample; the paper: 0.005); times between stored frames are interpolated",
+            positive=True,
+            example=0.04,
+        ),
+        SceneKey(
+            "time",
+            "fit_window",
+            5,
+            "int",
+            "frames of the sliding polynomial fit of each track (odd; the fitted velocity "
+            "and acceleration need at least as many frames)",
+            minimum=3,
+        ),
+        SceneKey("time", "fit_order", 2, "int", "order of the fitted polynomial", minimum=2),
+        SceneKey(
+            "time",
+            "dt_multiples",
+            [1, 2],
+            "ints",
+            "the Δt sweep: the paper's differences also over every m-th imaged frame, for "
+            "each m listed (Δt = m time.dt)",
         ),
         SceneKey(
             "cases",
@@ -452,6 +488,14 @@ def _check_value(key, value, where):
                 + _suggest(value, key.choices)
             )
         return value
+    if key.kind == "ints":
+        if (
+            not isinstance(value, list)
+            or not value
+            or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value)
+        ):
+            raise RimclError(f"{name} must be a list of whole numbers >= 1, got {value!r}")
+        return sorted(set(value))
     if key.kind == "box":
         pairs_ok = isinstance(value, list) and len(value) == 3
         pairs_ok = pairs_ok and all(isinstance(p, list) and len(p) == 2 for p in value)

@@ -99,12 +99,8 @@ def test_measure_config_maps_every_scene_choice():
     air, water = MeasureConfig.from_scene(scene, "C1"), MeasureConfig.from_scene(scene, "C4")
     assert air.renderer.threshold == default_scene()["renderer"]["threshold"]
     assert water.renderer.threshold == 40.0
-    assert (air.depth, air.integrator.step, air.run.device, air.time.frames) == (
-        2.0,
-        0.02,
-        "pocl",
-        3,
-    )
+    assert (air.depth, air.integrator.step, air.run.device) == (2.0, 0.02, "pocl")
+    assert air.time.frames == default_scene()["time"]["frames"]
     default = MeasureConfig.from_scene(default_scene(), "C0")
     assert default.run.device is None
     assert default.camera.fan == default_scene()["camera"]["fan"]
