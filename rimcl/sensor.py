@@ -263,6 +263,8 @@ class Sensor:
         """
         if not self.noise:
             return quantize(raw_image, scale, self.full_scale)
+        if key is None:
+            raise RimclError("a noisy sensor needs a NoiseKey (pass, frame, tracer) per image")
         raw_image = np.asarray(raw_image, dtype=np.float64)
         rows = int(window_row0) + np.arange(raw_image.shape[0])[:, None]
         columns = int(window_col0) + np.arange(raw_image.shape[1])[None, :]

@@ -178,6 +178,11 @@ def test_centroid_scatter_falls_as_one_over_root_electrons():
     assert scatter[-1] > 0 and np.max(counts) == 2**16 - 1  # today's camera has no scatter
 
 
+def test_noisy_sensor_needs_a_key():
+    with pytest.raises(RimclError, match="NoiseKey"):
+        Sensor(noise=True).digitize(np.ones((2, 2)), 1.0, 0, 0, None)
+
+
 def test_full_well_and_gain():
     sensor = Sensor(bit_depth=12, noise=True, peak_electrons=30_000.0, read_noise_e=0.0)
     assert sensor.gain == pytest.approx(30_000.0 / 4095)
