@@ -21,7 +21,7 @@ import numpy as np
 
 from rimcl.errors import RimclError
 
-CAMERAS = ("plane", "pupil")
+CAMERAS = ("plane", "pupil", "lens")
 
 # golden angle (rad): successive points of a Vogel spiral are this far apart in azimuth
 _GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))

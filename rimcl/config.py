@@ -10,15 +10,19 @@ loose keyword arguments. :meth:`MeasureConfig.from_scene` builds one from a scen
 import dataclasses
 import numbers
 
-from rimcl.camera import CAMERAS, PlaneCamera, PupilCamera
+from rimcl.camera import CAMERAS, FlatWindow, LensCamera, PlaneCamera, PupilCamera
 from rimcl.errors import RimclError
 from rimcl.imaging import Imaging
+from rimcl.media import Fluid
+from rimcl.mie import MieWeights
 from rimcl.render import Renderer
+from rimcl.sensor import Sensor
 
 DEFAULT_RAYS_PER_BATCH = 1 << 17  # rays traced per batch: ~40 MB of host memory
 DEFAULT_RAY_SAMPLE = 20_000
 ENGINES = ("numpy",)
 MAX_FRAMES = 1000
+DEFAULT_PSF_SIGMA = 7.0  # the study's PSF (px) when neither the scene nor a lens sets one
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,6 +46,18 @@ class CameraConfig:
         Sheet to pupil centre along the viewing axis (length units; default 4 L1).
     view_angle : float
         Angle of the viewing axis to ``x1``, towards ``+x2`` (degrees).
+    length_m : float, optional
+        Lens camera: metres per field length unit (the field's physical size).
+    focal_length_mm, magnification, working_distance_mm, pixel_pitch_um : float
+        Lens camera optics (give the magnification or the working distance).
+    sensor_pixels : tuple of 2 int
+        Lens camera: sensor pixels along ``x2`` and ``x3``.
+    wavelength_nm, particle_diameter_um : float
+        Lens camera: light and tracer size (diffraction and geometric image).
+    window_thickness_mm, window_index, outside_index : float
+        Lens camera: a flat window between fluid and lens (thickness 0: none).
+    fluid_index : float
+        Lens camera: index of the fluid at the window's inner face.
     """
 
     kind: str = "plane"
@@ -52,6 +68,18 @@ class CameraConfig:
     f_number: float = None
     distance: float = None
     view_angle: float = 0.0
+    length_m: float = None
+    focal_length_mm: float = 50.0
+    magnification: float = None
+    working_distance_mm: float = None
+    pixel_pitch_um: float = 6.5
+    sensor_pixels: tuple = (2048, 2048)
+    wavelength_nm: float = 532.0
+    particle_diameter_um: float = 10.0
+    window_thickness_mm: float = 0.0
+    window_index: float = 1.52
+    outside_index: float = 1.0
+    fluid_index: float = 1.0
 
     def build(self, scene):
         """The camera object for a :class:`rimcl.camera.Scene`."""
@@ -59,6 +87,8 @@ class CameraConfig:
             raise RimclError(f"unknown camera {self.kind!r}; choose from {CAMERAS}")
         if self.kind == "plane":
             return PlaneCamera(scene, int(self.fan))
+        if self.kind == "lens":
+            return self._lens(scene)
         distance = 4.0 * scene.depth if self.distance is None else float(self.distance)
         diameter = self.aperture_diameter
         if diameter is None and self.focal_length is None and self.f_number is None:
@@ -70,6 +100,33 @@ class CameraConfig:
             focal_length=self.focal_length,
             f_number=self.f_number,
             view_angle=float(self.view_angle),
+            rays=int(self.pupil_rays),
+        )
+
+    def _lens(self, scene):
+        if self.length_m is None:
+            raise RimclError(
+                "the lens camera needs the field's physical size: field.length_m "
+                "(metres per field length unit)"
+            )
+        window = None
+        if self.window_thickness_mm:
+            window = FlatWindow(
+                float(self.window_thickness_mm), float(self.window_index), float(self.outside_index)
+            )
+        return LensCamera(
+            scene,
+            float(self.length_m),
+            focal_length_mm=float(self.focal_length_mm),
+            f_number=8.0 if self.f_number is None else float(self.f_number),
+            magnification=self.magnification,
+            working_distance_mm=self.working_distance_mm,
+            pixel_pitch_um=float(self.pixel_pitch_um),
+            pixels=tuple(int(p) for p in self.sensor_pixels),
+            wavelength_nm=float(self.wavelength_nm),
+            particle_diameter_um=float(self.particle_diameter_um),
+            fluid_index=float(self.fluid_index),
+            window=window,
             rays=int(self.pupil_rays),
         )
 
@@ -106,20 +163,127 @@ class RendererConfig:
     bit_depth: int = 10
     scaling: str = "reference"
 
-    def build(self, scene):
-        """The :class:`rimcl.imaging.Imaging` of this camera over the scene's field of view."""
-        if int(self.pixels) < 1:
-            raise RimclError(f"the image needs at least 1 pixel, got {self.pixels}")
-        pixel_size = float(max(scene.fov_size)) / int(self.pixels)
+    def build(self, scene, camera=None, sensor=None):
+        """The :class:`rimcl.imaging.Imaging` of a camera over the scene's field of view.
+
+        A lens camera sets the pixel size, the image origin (its sensor centred on the
+        field of view) and, where ``psf_sigma`` is None, the PSF; otherwise ``pixels``
+        span the wider side of the field of view.
+        """
+        psf_sigma = self.psf_sigma
+        if isinstance(camera, LensCamera):
+            pixel_size = camera.pixel_size
+            origin = scene.fov_centre - 0.5 * camera.sensor_fov
+            psf_sigma = camera.psf_sigma_px if psf_sigma is None else psf_sigma
+        else:
+            if int(self.pixels) < 1:
+                raise RimclError(f"the image needs at least 1 pixel, got {self.pixels}")
+            pixel_size = float(max(scene.fov_size)) / int(self.pixels)
+            origin = scene.fov_lo
+        if psf_sigma is None:
+            raise RimclError("renderer.psf_sigma is needed (only a lens camera derives it)")
         renderer = Renderer(
             self.kind,
             pixel_size,
-            tuple(scene.fov_lo),
-            float(self.psf_sigma),
+            tuple(float(v) for v in origin),
+            float(psf_sigma),
             int(self.max_window),
             int(self.bit_depth),
         )
-        return Imaging(renderer, float(self.threshold), self.centroid_weights, self.scaling)
+        sensor = Sensor(bit_depth=int(self.bit_depth)) if sensor is None else sensor
+        return Imaging(renderer, float(self.threshold), self.centroid_weights, self.scaling, sensor)
+
+
+@dataclasses.dataclass(frozen=True)
+class SensorConfig:
+    """The camera's sensor (:class:`rimcl.sensor.Sensor`); ``noise = False`` is the
+    deterministic camera (scale, round, clip). The seed defaults to the tracers' seed."""
+
+    noise: bool = False
+    peak_electrons: float = 10_000.0
+    read_noise_e: float = 2.0
+    background_e: float = 0.0
+    full_well_e: float = 30_000.0
+    gain_e_per_count: float = None
+    seed: int = None
+
+    def build(self, bit_depth, default_seed):
+        return Sensor(
+            bit_depth=int(bit_depth),
+            noise=bool(self.noise),
+            peak_electrons=float(self.peak_electrons),
+            read_noise_e=float(self.read_noise_e),
+            background_e=float(self.background_e),
+            full_well_e=float(self.full_well_e),
+            gain_e_per_count=self.gain_e_per_count,
+            seed=int(default_seed if self.seed is None else self.seed),
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class MieConfig:
+    """Mie weights of the rays (:class:`rimcl.mie.MieWeights`); uniform when not enabled.
+
+    ``fluid_index`` None: the fluid's base index (``[fluid]``), else 1.
+    """
+
+    enabled: bool = False
+    diameter_um: float = 10.0
+    particle_index: float = 1.59
+    particle_absorption: float = 0.0
+    fluid_index: float = None
+    wavelength_nm: float = 532.0
+    sheet_direction: tuple = (0.0, 1.0, 0.0)
+    polarisation: str = "unpolarised"
+    polarisation_direction: tuple = (0.0, 0.0, 1.0)
+
+    def build(self, fluid=None):
+        """The weights, or None when off."""
+        if not self.enabled:
+            return None
+        fluid_index = self.fluid_index
+        if fluid_index is None:
+            fluid_index = 1.0 if fluid is None else float(fluid.index())
+        polarisation = self.polarisation
+        if polarisation == "linear":
+            polarisation = tuple(float(v) for v in self.polarisation_direction)
+        return MieWeights(
+            diameter_um=float(self.diameter_um),
+            particle_index=float(self.particle_index),
+            fluid_index=float(fluid_index),
+            wavelength_nm=float(self.wavelength_nm),
+            sheet_direction=tuple(float(v) for v in self.sheet_direction),
+            polarisation=polarisation,
+            particle_absorption=float(self.particle_absorption),
+        )
+
+
+@dataclasses.dataclass(frozen=True)
+class FluidConfig:
+    """The fluid of ``dT=…`` / ``dS=…`` cases (:class:`rimcl.media.Fluid`); ``kind = ""``
+    for none. ``light_density``, ``heavy_density``: the field's two fluids (dimensionless)."""
+
+    kind: str = ""
+    temperature_c: float = 20.0
+    salinity_g_kg: float = 0.0
+    pressure_pa: float = 101_325.0
+    relative_humidity: float = 0.0
+    wavelength_nm: float = 532.0
+    light_density: float = 1.0
+    heavy_density: float = 1.105
+
+    def build(self):
+        """The fluid, or None without one."""
+        if not self.kind:
+            return None
+        return Fluid(
+            self.kind,
+            temperature_c=float(self.temperature_c),
+            wavelength_nm=float(self.wavelength_nm),
+            salinity_g_kg=float(self.salinity_g_kg),
+            pressure_pa=float(self.pressure_pa),
+            relative_humidity=float(self.relative_humidity),
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -273,7 +437,7 @@ class MeasureConfig:
     x_sheet, depth : float, optional
         Sheet position and traced depth ``L1`` (defaults: see
         :meth:`rimcl.camera.Scene.from_grid`).
-    camera, renderer, integrator, tracers, time, run :
+    camera, renderer, integrator, sensor, mie, fluid, tracers, time, run :
         One object per stage.
     """
 
@@ -283,6 +447,9 @@ class MeasureConfig:
     camera: CameraConfig = CameraConfig()
     renderer: RendererConfig = RendererConfig()
     integrator: IntegratorConfig = IntegratorConfig()
+    sensor: SensorConfig = SensorConfig()
+    mie: MieConfig = MieConfig()
+    fluid: FluidConfig = FluidConfig()
     tracers: TracerConfig = TracerConfig()
     time: TimeConfig = TimeConfig()
     run: RunConfig = RunConfig()
@@ -312,6 +479,8 @@ class MeasureConfig:
         camera, renderer = scene["camera"], scene["renderer"]
         integrator, run = scene["integrator"], scene["run"]
         box = field["box"]
+        fluid = FluidConfig(**scene["fluid"])
+        base_fluid = fluid.build()
         return cls(
             box=None if box is None else tuple(tuple(pair) for pair in box),
             x_sheet=field["x_sheet"],
@@ -325,11 +494,25 @@ class MeasureConfig:
                 f_number=camera["f_number"],
                 distance=camera["distance"],
                 view_angle=camera["view_angle"],
+                length_m=field["length_m"],
+                focal_length_mm=camera["focal_length_mm"],
+                magnification=camera["magnification"],
+                working_distance_mm=camera["working_distance_mm"],
+                pixel_pitch_um=camera["pixel_pitch_um"],
+                sensor_pixels=tuple(camera["sensor_pixels"]),
+                wavelength_nm=camera["wavelength_nm"],
+                particle_diameter_um=camera["particle_diameter_um"],
+                window_thickness_mm=camera["window_thickness_mm"],
+                window_index=camera["window_index"],
+                outside_index=camera["outside_index"],
+                fluid_index=1.0 if base_fluid is None else float(base_fluid.index()),
             ),
             renderer=RendererConfig(
                 kind=renderer["kind"],
                 pixels=renderer["pixels"],
-                psf_sigma=renderer["psf_sigma"],
+                psf_sigma=renderer["psf_sigma"]
+                if renderer["psf_sigma"] is not None or camera["kind"] == "lens"
+                else DEFAULT_PSF_SIGMA,
                 threshold=cases["thresholds"].get(case, renderer["threshold"]),
                 centroid_weights=renderer["centroid_weights"],
                 max_window=renderer["max_window"],
@@ -341,6 +524,15 @@ class MeasureConfig:
                 precision=integrator["precision"],
                 step=integrator["step"],
             ),
+            sensor=SensorConfig(**scene["sensor"]),
+            mie=MieConfig(
+                **{
+                    **scene["mie"],
+                    "sheet_direction": tuple(scene["mie"]["sheet_direction"]),
+                    "polarisation_direction": tuple(scene["mie"]["polarisation_direction"]),
+                }
+            ),
+            fluid=fluid,
             tracers=TracerConfig(
                 count=tracers["count"], seed=tracers["seed"], margin=tracers["margin"]
             ),

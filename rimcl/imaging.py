@@ -34,7 +34,8 @@ import numpy as np
 
 from rimcl.centroid import CENTROID_WEIGHTS, NO_POSITION, TracerFlag, locate, not_found
 from rimcl.errors import RimclError
-from rimcl.render import Renderer, quantize, scale_for
+from rimcl.render import Renderer
+from rimcl.sensor import NoiseKey, Sensor
 
 SCALINGS = ("reference", "per_image")
 IMAGE_COLUMNS = {
@@ -72,6 +73,9 @@ class Imaging:
         Grey threshold in counts (pixels strictly above it belong to tracers).
     centroid_weights : {"excess", "grey"}
         See :mod:`rimcl.centroid`.
+    sensor : rimcl.sensor.Sensor, optional
+        Digitises the rendered light (default: the deterministic camera of the renderer's
+        bit depth: scale, round, clip).
     scaling : {"reference", "per_image"}
         ``reference``: each tracer's measured image uses the scale of its reference image
         (comparable images; DESIGN §6.3); ``per_image``: every image is scaled to its own
@@ -83,8 +87,16 @@ class Imaging:
     threshold: float
     centroid_weights: str = "excess"
     scaling: str = "reference"
+    sensor: Sensor = None
 
     def __post_init__(self):
+        if self.sensor is None:
+            object.__setattr__(self, "sensor", Sensor(bit_depth=self.renderer.bit_depth))
+        elif int(self.sensor.bit_depth) != int(self.renderer.bit_depth):
+            raise RimclError(
+                f"the sensor has {self.sensor.bit_depth} bits but the renderer "
+                f"{self.renderer.bit_depth}"
+            )
         if self.centroid_weights not in CENTROID_WEIGHTS:
             raise RimclError(
                 f"unknown centroid weights {self.centroid_weights!r}; "
@@ -105,6 +117,7 @@ class Imaging:
             "threshold": float(self.threshold),
             "centroid_weights": self.centroid_weights,
             "scaling": self.scaling,
+            "sensor": self.sensor.describe(),
         }
 
 
@@ -129,7 +142,9 @@ def optics_mean(points, weights):
         return np.einsum("bk,bkc->bc", weights, safe) / total[:, None]
 
 
-def image_batch(imaging, points, usable, weights, flags, scales=None, timings=None, canvas=None):
+def image_batch(
+    imaging, points, usable, weights, flags, scales=None, timings=None, canvas=None, noise=None
+):
     """Render, digitise and locate each tracer of a batch (NumPy engine).
 
     Parameters
@@ -150,6 +165,9 @@ def image_batch(imaging, points, usable, weights, flags, scales=None, timings=No
         ``render`` and ``centroid`` seconds are added to it.
     canvas : rimcl.render.FrameImage, optional
         Receives each window's counts (for a full-frame picture).
+    noise : (int, int, ndarray), optional
+        ``(pass_id, frame, tracer_ids)``: the keys of a noisy sensor's draws
+        (:class:`rimcl.sensor.NoiseKey`); ``tracer_ids`` of shape (B,).
 
     Returns
     -------
@@ -179,8 +197,9 @@ def image_batch(imaging, points, usable, weights, flags, scales=None, timings=No
             if outside:
                 tracer_flags |= TracerFlag.RAYS_OUTSIDE_WINDOW
             if scale is None:
-                scale = scale_for(raw, renderer.full_scale)
-            counts, saturated = quantize(raw, scale, renderer.full_scale)
+                scale = imaging.sensor.scale_for(raw)
+            key = None if noise is None else NoiseKey(noise[0], noise[1], int(noise[2][k]))
+            counts, saturated = imaging.sensor.digitize(raw, scale, window.row0, window.col0, key)
             out["peak"][k] = float(np.max(raw)) * scale
             middle = time.perf_counter()
             blob = locate(counts, imaging.threshold, imaging.centroid_weights)

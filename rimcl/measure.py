@@ -33,8 +33,10 @@ from rimcl.errors import RimclError
 from rimcl.field import Field
 from rimcl.flow.crop import CroppedSource
 from rimcl.imaging import Imaging, empty_columns, image_batch
+from rimcl.media import index_from_density
 from rimcl.provenance import atomic_path, check_output, stamp_h5, to_json
 from rimcl.render import FrameImage
+from rimcl.sensor import MEASURED_PASS, REFERENCE_PASS
 from rimcl.trace import STATUS_NAMES, default_step, trace_rays
 from rimcl.track import (
     SheetVelocity,
@@ -141,15 +143,79 @@ def _open_source(field, stack):
     return field, "<in memory>" if path is None else str(Path(path).resolve())
 
 
-def _case_of(source, case, k_rho):
-    """Case name and G; files of δn carry their own index and take neither."""
+@dataclasses.dataclass(frozen=True)
+class CaseIndex:
+    """How one case turns the field file into refractive index.
+
+    Attributes
+    ----------
+    name : str
+        ``C0``…``C4``, ``G=…``, ``dT=…``/``dS=…`` or ``delta_n``.
+    g : float
+        Gladstone–Dale product (NaN for ``delta_n`` files and fluid cases).
+    fluid : rimcl.media.Fluid, optional
+        For a fluid case: the fluid whose ``n(T)`` or ``n(S)`` maps the density.
+    difference : float
+        ``ΔT`` (K) or ``ΔS`` (g/kg) of a fluid case.
+    light, heavy : float
+        The field's two dimensionless densities (fluid cases).
+    """
+
+    name: str
+    g: float
+    fluid: object = None
+    difference: float = 0.0
+    light: float = 1.0
+    heavy: float = 1.105
+
+    def field(self, source, frame, time):
+        """The field of a stored frame, or interpolated in time when ``frame`` is None."""
+        if self.fluid is None:
+            return _load_frame(source, frame, time, self.g)
+        # G = 1 gives δn = ρ - mean ρ and n_ref = 1 + mean ρ: the density, at any time
+        unit = _load_frame(source, frame, time, 1.0)
+        density = unit.delta_n.astype(np.float64) + (unit.n_ref - 1.0)
+        index = index_from_density(
+            density, self.fluid, self.difference, unit.gradient, self.light, self.heavy
+        )
+        return Field.from_arrays(
+            index.delta_n,
+            spacing=unit.spacing,
+            origin=unit.origin,
+            n_ref=index.n_ref,
+            gradient=index.gradient,
+            boundary=unit.boundary,
+            attrs={**unit.attrs, "case": self.name},
+        )
+
+
+def _case_of(source, case, k_rho, fluid_config):
+    """The :class:`CaseIndex` of a case; files of δn carry their own index."""
+    from rimcl.flow.cases import fluid_case, resolve_k_rho
+
     if getattr(source, "kind", "density") == "delta_n":
         if case is not None or k_rho is not None:
             raise RimclError("this field file stores delta_n directly; --case/--k-rho do not apply")
-        return "delta_n", float("nan")
-    from rimcl.flow.cases import resolve_k_rho
-
-    return resolve_k_rho(case, k_rho)
+        return CaseIndex("delta_n", float("nan"))
+    difference = None if case is None else fluid_case(case)
+    if difference is None:
+        return CaseIndex(*resolve_k_rho(case, k_rho))
+    fluid = fluid_config.build()
+    if fluid is None:
+        raise RimclError(f"case {case} needs a fluid: set [fluid] kind (water, air, saltwater)")
+    quantity, value = difference
+    if (quantity == "salinity") != (fluid.kind == "saltwater"):
+        raise RimclError(
+            f"case {case}: a {fluid.kind} case varies the {fluid.unit}, not {quantity}"
+        )
+    return CaseIndex(
+        str(case).strip(),
+        float("nan"),
+        fluid,
+        value,
+        float(fluid_config.light_density),
+        float(fluid_config.heavy_density),
+    )
 
 
 def _load_frame(source, frame, time, k_rho):
@@ -192,6 +258,8 @@ class Setup:
         Sheet, exit plane and field of view.
     camera : PlaneCamera or PupilCamera
     imaging : rimcl.imaging.Imaging
+    mie : rimcl.mie.MieWeights or None
+        Ray weights (None: uniform).
     trace_options : dict
         ``interp``, ``precision``, ``step`` and ``device`` for :func:`rimcl.trace_rays`.
     frame_ids : list of int or None
@@ -216,6 +284,7 @@ class Setup:
     scene: Scene
     camera: object
     imaging: Imaging
+    mie: object
     trace_options: dict
     frame_ids: list
     time: object
@@ -290,7 +359,7 @@ def _frames_of(source, time_config):
     return frame_ids, times, dt
 
 
-def _setup(source, source_name, g, config, streams, shard):
+def _setup(source, source_name, case_index, config, streams, shard):
     """Resolve the configuration against the field: scene, camera, imaging, tracers, key."""
     from rimcl.device import describe_device, select_device
 
@@ -299,7 +368,9 @@ def _setup(source, source_name, g, config, streams, shard):
         source.origin, source.spacing, source.shape, source.boundary, config.x_sheet, config.depth
     )
     camera = config.camera.build(scene)
-    imaging = config.renderer.build(scene)
+    sensor = config.sensor.build(config.renderer.bit_depth, config.tracers.seed)
+    imaging = config.renderer.build(scene, camera, sensor)
+    mie = config.mie.build(config.fluid.build())
     device = select_device(config.run.device)
     every_tracer = seed_tracers(
         config.tracers.count,
@@ -320,6 +391,7 @@ def _setup(source, source_name, g, config, streams, shard):
         scene=scene,
         camera=camera,
         imaging=imaging,
+        mie=mie,
         trace_options=trace_options,
         frame_ids=frame_ids,
         time=config.time,
@@ -333,7 +405,7 @@ def _setup(source, source_name, g, config, streams, shard):
     )
     calibration = None
     if integrator.interp == "auto":
-        calibration = _calibrate_interp(setup, g, every_tracer)
+        calibration = _calibrate_interp(setup, case_index, every_tracer)
         trace_options["interp"] = calibration["interp"]
     setup.key = {
         "field": source_name,
@@ -353,6 +425,7 @@ def _setup(source, source_name, g, config, streams, shard):
         "margin": float(config.tracers.margin),
         "camera": camera.describe(),
         "render": imaging.describe(),
+        "mie": None if mie is None else mie.describe(),
         "trace": {
             "interp": trace_options["interp"],
             "precision": integrator.precision,
@@ -366,7 +439,8 @@ def _setup(source, source_name, g, config, streams, shard):
 class _Pass:
     """One imaging pass (reference or measured) over all tracers of all frames."""
 
-    def __init__(self, frames, tracers):
+    def __init__(self, pass_id, frames, tracers):
+        self.pass_id = pass_id
         self.images = empty_columns((frames, tracers))
         self.status_counts = np.zeros(len(STATUS_NAMES), dtype=np.int64)
         self.vignetted = 0
@@ -418,15 +492,21 @@ def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None
         collected = collected.reshape(len(ids), rays)
         flags = np.where(ok.all(axis=1), 0, int(TracerFlag.RAYS_FAILED))
         flags |= np.where((ok & ~collected).any(axis=1), int(TracerFlag.RAYS_VIGNETTED), 0)
+        if hasattr(camera, "image_points"):  # a lens behind a window images through it
+            points = camera.image_points(result.end_pos, result.end_dir)
+        else:
+            points = result.image_pos[:, 1:]
+        weights = 1.0 if setup.mie is None else setup.mie.weights(directions)
         columns = image_batch(
             setup.imaging,
-            result.image_pos[:, 1:].reshape(len(ids), rays, 2),
+            points.reshape(len(ids), rays, 2),
             collected,
-            1.0,
+            np.reshape(weights, (len(ids), rays)) if setup.mie is not None else weights,
             flags,
             scales=None if scales is None else scales[ids],
             timings=timings,
             canvas=extras.get("canvas"),
+            noise=(pass_.pass_id, frame, setup.first_tracer + ids),
         )
         for name, values in columns.items():
             pass_.images[name][frame, ids] = values
@@ -548,9 +628,9 @@ def run_render(
         source, source_name = _open_source(field, stack)
         if config.box is not None:
             source = CroppedSource(source, config.box)
-        case_name, g = _case_of(source, case, k_rho)
+        case_index = _case_of(source, case, k_rho, config.fluid)
         streams = np.random.SeedSequence(int(config.tracers.seed)).spawn(2)
-        setup, calibration = _setup(source, source_name, g, config, streams, shard)
+        setup, calibration = _setup(source, source_name, case_index, config, streams, shard)
         count = len(setup.start_positions)
         frames = len(setup.frame_ids)
         bar = _progress(progress, (frames if reference is not None else 2 * frames) * count)
@@ -573,14 +653,14 @@ def run_render(
                 pixel_size = setup.imaging.renderer.pixel_size
                 extent = np.ceil(setup.scene.fov_size / pixel_size).astype(int)
                 canvas = FrameImage(extent[0], extent[1], setup.imaging.renderer.full_scale)
-            measured, delta_n_max = _measure(setup, g, reference, sampler, canvas, bar)
+            measured, delta_n_max = _measure(setup, case_index, reference, sampler, canvas, bar)
         finally:
             if bar is not None:
                 bar.close()
         run_config = {
             **setup.key,
-            "case": case_name,
-            "k_rho": g,
+            "case": case_index.name,
+            "k_rho": case_index.g,
             "start_frame": int(config.time.start_frame),
             "rays_per_batch": int(config.run.rays_per_batch),
             "ray_sample": int(config.run.ray_sample),
@@ -595,12 +675,12 @@ def run_render(
     return result
 
 
-def _measure(setup, g, reference, sampler, canvas, bar):
+def _measure(setup, case_index, reference, sampler, canvas, bar):
     """The measured pass: every frame through its field, with the reference's scales."""
-    measured = _Pass(len(setup.frame_ids), len(setup.start_positions))
+    measured = _Pass(MEASURED_PASS, len(setup.frame_ids), len(setup.start_positions))
     delta_n_max = 0.0
     for f, frame in enumerate(setup.frame_ids):
-        field = _load_frame(setup.source, frame, setup.times[f], g)
+        field = case_index.field(setup.source, frame, setup.times[f])
         delta_n_max = max(delta_n_max, field.delta_n_range)
         extras = {"bar": bar}
         if f == 0:
@@ -622,7 +702,7 @@ def _measure(setup, g, reference, sampler, canvas, bar):
 CALIBRATION_TRACERS = 16
 
 
-def _calibrate_interp(setup, g, positions):
+def _calibrate_interp(setup, case_index, positions):
     """Choose the interpolation for ``interp="auto"`` once, on the first measured frame.
 
     The tolerance is 0.01 pixel of this camera. Every batch, frame and the reference then
@@ -635,7 +715,7 @@ def _calibrate_interp(setup, g, positions):
     origins = np.repeat(setup.scene.in_sheet(positions[chosen]), camera.rays_per_tracer, axis=0)
     directions = camera.directions(positions[chosen]).reshape(-1, 3)
     record = calibrate(
-        _load_frame(setup.source, setup.frame_ids[0], setup.times[0], g),
+        case_index.field(setup.source, setup.frame_ids[0], setup.times[0]),
         origins,
         directions,
         x_end=setup.scene.x_end,
@@ -693,7 +773,7 @@ def make_reference(setup, bar=None):
             "step": _reference_step(setup.trace_options["step"], setup.source),
         },
     )
-    ref = _Pass(len(setup.frame_ids), len(setup.start_positions))
+    ref = _Pass(REFERENCE_PASS, len(setup.frame_ids), len(setup.start_positions))
     for f in range(len(setup.frame_ids)):
         _image_frame(reference_setup, ref, f, uniform, tracks[f], extras={"bar": bar})
     if ref.status_counts[0] == ref.vignetted:

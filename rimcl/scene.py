@@ -38,9 +38,10 @@ class SceneKey:
     default : object
         Value when the key is absent; ``None`` for keys whose default is decided by the
         pipeline (the printed scene shows them commented out, with ``example``).
-    kind : {"str", "int", "float", "bool", "names", "thresholds", "box", "ints"}
+    kind : {"str", "int", "float", "bool", "names", "thresholds", "box", "ints", "vector"}
         ``names``: a list of strings; ``thresholds``: a table of case name to number;
-        ``box``: three ``[lo, hi]`` pairs; ``ints``: a list of whole numbers >= 1.
+        ``box``: three ``[lo, hi]`` pairs; ``ints``: a list of whole numbers >= 1;
+        ``vector``: three numbers.
     doc : str
         What the key means, with units.
     choices : tuple of str
@@ -281,12 +282,13 @@ def _keys():
         SceneKey(
             "renderer",
             "psf_sigma",
-            7.0,
+            None,
             "float",
-            "Gaussian point-spread sigma (pixels; 2.3 px gives the paper's ~10 px tracer "
-            "image); wide enough here that water-like cases (C4), whose rays spread over "
-            "~1e-2 L, still image as one blob above threshold",
+            "Gaussian point-spread sigma (pixels); default 7 px (2.3 px gives the paper's "
+            "~10 px tracer image; 7 px keeps water-like cases, whose rays spread over "
+            "~1e-2 L, one blob above threshold), or a lens camera's own tracer image",
             positive=True,
+            example=7.0,
         ),
         SceneKey(
             "renderer",
@@ -357,6 +359,198 @@ def _keys():
             "integration step in t = s/n (field length units); default: half a cell",
             positive=True,
             example=0.05,
+        ),
+        SceneKey(
+            "field",
+            "length_m",
+            None,
+            "float",
+            "metres per field length unit (the field's physical size; the lens camera needs it)",
+            positive=True,
+            example=0.0106,
+        ),
+        SceneKey(
+            "camera",
+            "focal_length_mm",
+            50.0,
+            "float",
+            "lens camera: focal length (mm); camera.f_number is its f-number (default 8)",
+            positive=True,
+        ),
+        SceneKey(
+            "camera",
+            "magnification",
+            None,
+            "float",
+            "lens camera: magnification M (or working_distance_mm)",
+            positive=True,
+            example=0.2,
+        ),
+        SceneKey(
+            "camera",
+            "working_distance_mm",
+            None,
+            "float",
+            "lens camera: object distance from the lens to the (apparent) sheet (mm)",
+            positive=True,
+            example=300.0,
+        ),
+        SceneKey(
+            "camera",
+            "pixel_pitch_um",
+            6.5,
+            "float",
+            "lens camera: sensor pixel pitch (µm)",
+            positive=True,
+        ),
+        SceneKey(
+            "camera",
+            "sensor_pixels",
+            [2048, 2048],
+            "ints",
+            "lens camera: sensor pixels along x2 and x3 (sets the image; renderer.pixels unused)",
+        ),
+        SceneKey(
+            "camera",
+            "wavelength_nm",
+            532.0,
+            "float",
+            "lens camera: vacuum wavelength (nm)",
+            positive=True,
+        ),
+        SceneKey(
+            "camera",
+            "particle_diameter_um",
+            10.0,
+            "float",
+            "lens camera: tracer diameter (µm), for its geometric image",
+            positive=True,
+        ),
+        SceneKey(
+            "camera",
+            "window_thickness_mm",
+            0.0,
+            "float",
+            "lens camera: a flat window between fluid and lens (mm; 0: none)",
+            minimum=0.0,
+        ),
+        SceneKey("camera", "window_index", 1.52, "float", "window glass index", positive=True),
+        SceneKey(
+            "camera", "outside_index", 1.0, "float", "index between window and lens", positive=True
+        ),
+        SceneKey(
+            "sensor",
+            "noise",
+            False,
+            "bool",
+            "photon shot noise, read noise and background (false: the deterministic camera)",
+        ),
+        SceneKey(
+            "sensor",
+            "peak_electrons",
+            10000.0,
+            "float",
+            "mean photoelectrons at the peak of a tracer's reference image",
+            positive=True,
+        ),
+        SceneKey("sensor", "read_noise_e", 2.0, "float", "read noise (e- rms)", minimum=0.0),
+        SceneKey("sensor", "background_e", 0.0, "float", "background per pixel (e-)", minimum=0.0),
+        SceneKey("sensor", "full_well_e", 30000.0, "float", "full well (e-)", positive=True),
+        SceneKey(
+            "sensor",
+            "gain_e_per_count",
+            None,
+            "float",
+            "e- per count; default: full well / (2**bit_depth - 1)",
+            positive=True,
+            example=7.3,
+        ),
+        SceneKey(
+            "sensor",
+            "seed",
+            None,
+            "int",
+            "seed of the noise draws; default tracers.seed",
+            minimum=0,
+            example=0,
+        ),
+        SceneKey(
+            "mie", "enabled", False, "bool", "weight each ray by its Mie scattering intensity"
+        ),
+        SceneKey("mie", "diameter_um", 10.0, "float", "particle diameter (µm)", positive=True),
+        SceneKey(
+            "mie",
+            "particle_index",
+            1.59,
+            "float",
+            "particle index (1.59 polystyrene, 1.45 DEHS)",
+            positive=True,
+        ),
+        SceneKey("mie", "particle_absorption", 0.0, "float", "imaginary part of it", minimum=0.0),
+        SceneKey(
+            "mie",
+            "fluid_index",
+            None,
+            "float",
+            "index around the particle; default: the [fluid]'s, else 1",
+            positive=True,
+            example=1.335,
+        ),
+        SceneKey("mie", "wavelength_nm", 532.0, "float", "vacuum wavelength (nm)", positive=True),
+        SceneKey(
+            "mie",
+            "sheet_direction",
+            [0.0, 1.0, 0.0],
+            "vector",
+            "propagation direction of the light sheet (x1, x2, x3)",
+        ),
+        SceneKey(
+            "mie",
+            "polarisation",
+            "unpolarised",
+            "str",
+            "relative to each ray's scattering plane, or linear along polarisation_direction",
+            choices=("unpolarised", "perpendicular", "parallel", "linear"),
+        ),
+        SceneKey(
+            "mie",
+            "polarisation_direction",
+            [0.0, 0.0, 1.0],
+            "vector",
+            "the linear polarisation (perpendicular to the sheet direction)",
+        ),
+        SceneKey(
+            "fluid",
+            "kind",
+            "",
+            "str",
+            'the fluid of dT=/dS= cases: water, air or saltwater ("": none)',
+            choices=("", "water", "air", "saltwater"),
+        ),
+        SceneKey("fluid", "temperature_c", 20.0, "float", "base temperature (°C)"),
+        SceneKey(
+            "fluid", "salinity_g_kg", 0.0, "float", "base salinity (g/kg; saltwater)", minimum=0.0
+        ),
+        SceneKey("fluid", "pressure_pa", 101325.0, "float", "pressure (Pa; air)", positive=True),
+        SceneKey(
+            "fluid", "relative_humidity", 0.0, "float", "relative humidity 0..1 (air)", minimum=0.0
+        ),
+        SceneKey("fluid", "wavelength_nm", 532.0, "float", "vacuum wavelength (nm)", positive=True),
+        SceneKey(
+            "fluid",
+            "light_density",
+            1.0,
+            "float",
+            "the field's light fluid (dimensionless density): the warm or fresh one",
+            positive=True,
+        ),
+        SceneKey(
+            "fluid",
+            "heavy_density",
+            1.105,
+            "float",
+            "the field's heavy fluid: the cold or salty one",
+            positive=True,
         ),
         SceneKey(
             "run",
@@ -495,7 +689,15 @@ def _check_value(key, value, where):
             or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value)
         ):
             raise RimclError(f"{name} must be a list of whole numbers >= 1, got {value!r}")
-        return sorted(set(value))
+        return [int(v) for v in value]
+    if key.kind == "vector":
+        if not (
+            isinstance(value, list)
+            and len(value) == 3
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        ):
+            raise RimclError(f"{name} must be three numbers [x1, x2, x3], got {value!r}")
+        return [float(v) for v in value]
     if key.kind == "box":
         pairs_ok = isinstance(value, list) and len(value) == 3
         pairs_ok = pairs_ok and all(isinstance(p, list) and len(p) == 2 for p in value)
@@ -536,11 +738,14 @@ def _check_number(key, value, name):
 
 
 def _check_cases(names, where):
-    from rimcl.flow.cases import CASES, resolve_k_rho
+    from rimcl.flow.cases import CASES, fluid_case, resolve_k_rho
 
     resolved = []
     for case in names:
         try:
+            if fluid_case(case) is not None:
+                resolved.append(case.strip())
+                continue
             resolved.append(resolve_k_rho(case=case)[0])
         except RimclError as exc:
             raise RimclError(f"{where}: {exc}{_suggest(case.upper(), CASES)}") from None
@@ -590,6 +795,14 @@ def validate_scene(raw, where="the scene"):
                 )
                 raise RimclError(f"unknown key {section}.{name} in {where}{hint}")
             scene[section][name] = _check_value(key, value, where)
+    from rimcl.flow.cases import fluid_case
+
+    fluid_cases = [c for c in scene["cases"]["names"] if fluid_case(c) is not None]
+    if fluid_cases and not scene["fluid"]["kind"]:
+        raise RimclError(
+            f"cases {', '.join(fluid_cases)} in {where} need a fluid: set [fluid] kind "
+            "(water, air or saltwater)"
+        )
     unknown = set(scene["cases"]["thresholds"]) - set(scene["cases"]["names"])
     if unknown:
         raise RimclError(
