@@ -158,16 +158,22 @@ def import_(inputs, axes, crop, stride, frames, t0, dt, boundary, period, gradie
 @field.command()
 @_field_argument
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
+@click.option(
+    "--values",
+    is_flag=True,
+    help="Also stream every frame for value ranges, velocity rms and Δn_max per case.",
+)
 @handle_errors
-def info(field_path, as_json):
-    """Grid, frames, times, value ranges, memory and Δn_max per case of a field file.
+def info(field_path, as_json, values):
+    """Grid, frames, times, storage and memory of a field file (metadata only, at once
+    whatever its size); with --values also value ranges and Δn_max per case.
 
     FIELD defaults to the shipped sample.
     """
     from rimcl.flow import sample_path
     from rimcl.flow.info import describe_field_file, format_description
 
-    described = describe_field_file(field_path or sample_path())
+    described = describe_field_file(field_path or sample_path(), values=values)
     click.echo(json.dumps(described, indent=2) if as_json else format_description(described))
 
 

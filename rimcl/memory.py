@@ -1,0 +1,269 @@
+"""Memory checks made before large allocations: estimate, compare, refuse with one line.
+
+Every allocation whose size comes from user input (a file's declared grid, a number of
+tracers or rays, a grid size) is estimated first and compared with the memory this
+process can still obtain: on the host, the smallest of the free physical memory, the
+cgroup limit and the address-space limit (``RLIMIT_AS``); on an OpenCL device, its global
+memory and largest single buffer. A request that does not fit is refused with a
+:class:`~rimcl.errors.RimclError` that names both sizes, before any of it is allocated.
+
+The per-element costs below are peaks measured with :mod:`tracemalloc` (rounded up), not
+the sizes of the final arrays: loading a frame, for instance, goes through float64
+intermediates several times the size of the float32 field it returns.
+"""
+
+import math
+import os
+import re
+from pathlib import Path
+
+from rimcl.errors import RimclError
+
+#: Peak host bytes per grid node while a field file frame becomes a Field (float64
+#: density, δn and gradient intermediates; measured 56-80).
+FIELD_LOAD_BYTES_PER_NODE = 96
+#: Device bytes per grid node of an uploaded field, per interpolation: δn and ∇n as one
+#: float4 (trilinear, texture); one float of B-spline coefficients (bspline3).
+FIELD_DEVICE_BYTES_PER_NODE = {"trilinear": 16, "texture": 16, "bspline3": 4, "auto": 16}
+#: Peak host bytes per traced ray held at once: inputs, kernel outputs and the
+#: TraceResult arrays (measured 430-460).
+RAY_HOST_BYTES = 512
+#: Host bytes per tracer of a render run with 3 frames: reference and measured images,
+#: tracks, the assembled per-frame tables (measured about 1 kB).
+RENDER_BYTES_PER_TRACER = 2048
+#: Host bytes per pixel of one tracer's image window while it is rendered and labelled.
+WINDOW_BYTES_PER_PIXEL = 40
+#: Host bytes per grid node of ``rimcl field synth``: the spectral state, four RK4 stages
+#: and the right-hand side's work arrays (measured 425), plus per recorded frame the
+#: float64 density, velocity and gradient (56).
+SYNTH_BYTES_PER_NODE = 448
+SYNTH_BYTES_PER_NODE_PER_FRAME = 64
+
+
+def format_bytes(count):
+    """``count`` bytes as a short human-readable size (``"3.2 GiB"``)."""
+    count = float(count)
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if abs(count) < 1024 or unit == "PiB":
+            return f"{count:.0f} {unit}" if unit == "bytes" else f"{count:.1f} {unit}"
+        count /= 1024
+    return f"{count:.1f} PiB"  # pragma: no cover - the loop always returns
+
+
+def _read_number(path, pattern=None):
+    """An integer from a small system file (or from the line matching ``pattern``)."""
+    try:
+        text = Path(path).read_text()
+    except OSError:
+        return None
+    if pattern is not None:
+        found = re.search(pattern, text, re.MULTILINE)
+        if found is None:
+            return None
+        text = found.group(1)
+    text = text.strip()
+    return int(text) if text.isdigit() else None
+
+
+def _physical_available():
+    kib = _read_number("/proc/meminfo", r"^MemAvailable:\s+(\d+) kB")
+    if kib is not None:
+        return kib * 1024
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _cgroup_available():
+    """Room left under a cgroup memory limit (v2, then v1), or None without a limit."""
+    for limit_file, usage_file in (
+        ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+        (
+            "/sys/fs/cgroup/memory/memory.limit_in_bytes",
+            "/sys/fs/cgroup/memory/memory.usage_in_bytes",
+        ),
+    ):
+        limit, usage = _read_number(limit_file), _read_number(usage_file)
+        # v1 reports "no limit" as a huge number near 2**63
+        if limit is not None and usage is not None and limit < 2**60:
+            return max(limit - usage, 0)
+    return None
+
+
+def _address_space_available():
+    """Room left under the address-space limit (``ulimit -v``), or None without one."""
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - not on POSIX
+        return None
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    if soft == resource.RLIM_INFINITY:
+        return None
+    used_kib = _read_number("/proc/self/status", r"^VmSize:\s+(\d+) kB") or 0
+    return max(soft - used_kib * 1024, 0)
+
+
+def host_available():
+    """Bytes of memory this process can still allocate on the host (best estimate).
+
+    The smallest of: free physical memory (``MemAvailable``), the room under a cgroup
+    memory limit, and the room under ``RLIMIT_AS``.
+
+    Returns
+    -------
+    int
+    """
+    found = [
+        value
+        for value in (_physical_available(), _cgroup_available(), _address_space_available())
+        if value is not None
+    ]
+    return int(min(found)) if found else 2**62
+
+
+def check_host(needed, what):
+    """Refuse, before allocating, ``needed`` bytes of host memory that are not there.
+
+    Parameters
+    ----------
+    needed : int or float
+        Estimated peak bytes.
+    what : str
+        What needs them, for the message (e.g. ``"frame 0 of f.h5 (1024 x 1024 x 1024
+        nodes)"``).
+
+    Raises
+    ------
+    RimclError
+        ``"<what> needs about N GiB of memory, but only M GiB is available"``.
+    """
+    available = host_available()
+    if not math.isfinite(needed) or needed > available:
+        raise RimclError(
+            f"{what} needs about {format_bytes(needed)} of memory, but only "
+            f"{format_bytes(available)} is available"
+        )
+
+
+def check_device(needed, device, what, largest=None):
+    """Refuse an upload to an OpenCL device that exceeds its memory.
+
+    Parameters
+    ----------
+    needed : int or float
+        Bytes on the device in all.
+    device : pyopencl.Device
+    what : str
+        What is uploaded, for the message.
+    largest : int or float, optional
+        Bytes of the largest single buffer (checked against ``CL_DEVICE_MAX_MEM_ALLOC_SIZE``);
+        default ``needed``.
+    """
+    largest = needed if largest is None else largest
+    name = device.name.strip()
+    if needed > device.global_mem_size:
+        raise RimclError(
+            f"{what} needs about {format_bytes(needed)} of device memory, but {name} has "
+            f"{format_bytes(device.global_mem_size)}"
+        )
+    if largest > device.max_mem_alloc_size:
+        raise RimclError(
+            f"{what} needs one buffer of {format_bytes(largest)}, but the largest buffer "
+            f"{name} allows is {format_bytes(device.max_mem_alloc_size)}"
+        )
+
+
+def _nodes(shape):
+    return math.prod(int(n) for n in shape)
+
+
+def _shape_text(shape):
+    n3, n2, n1 = (int(n) for n in shape)
+    return f"{n1} x {n2} x {n3} nodes"
+
+
+def check_field_memory(shape, what, device=None, interp="trilinear"):
+    """Refuse to load a field frame of ``shape`` (and upload it) when it cannot fit.
+
+    Parameters
+    ----------
+    shape : tuple of 3 int
+        ``(n3, n2, n1)``.
+    what : str
+        The frame, for the message.
+    device : pyopencl.Device, optional
+        Also check the upload to this device.
+    interp : str
+        Interpolation, which decides the device layout.
+    """
+    nodes = _nodes(shape)
+    label = f"{what} ({_shape_text(shape)})"
+    check_host(nodes * FIELD_LOAD_BYTES_PER_NODE, label)
+    if device is not None:
+        per_node = FIELD_DEVICE_BYTES_PER_NODE.get(interp, 16)
+        check_device(nodes * per_node, device, label)
+
+
+def check_array_memory(shape, itemsize, what, factor=2):
+    """Refuse to read an array of ``shape`` and ``itemsize`` when it cannot fit.
+
+    ``factor`` covers the temporaries of reading and checking it (a float32 copy, a
+    finiteness mask).
+    """
+    count = _nodes(shape) if len(shape) else 1
+    check_host(count * int(itemsize) * factor, what)
+
+
+def check_trace_memory(rays, what="tracing"):
+    """Refuse a trace of ``rays`` rays held at once that cannot fit in host memory.
+
+    The kernel itself runs in batches of fixed size, so the device side is bounded; the
+    host keeps every ray's inputs and results until they are written.
+
+    Parameters
+    ----------
+    rays : int
+    what : str
+        For the message.
+    """
+    rays = int(rays)
+    check_host(rays * RAY_HOST_BYTES, f"{what} {rays:,} rays")
+
+
+def check_render_memory(tracers, rays_per_tracer, rays_per_batch, frames=3, max_window=512):
+    """Refuse a render run whose tracer tables or one ray batch cannot fit in memory.
+
+    Tracers are traced in batches of ``max(1, rays_per_batch // rays_per_tracer)``, so a
+    batch holds at least one tracer's rays; the per-tracer tables of every frame are held
+    to the end. The kernel runs in batches of fixed size, so the device side is bounded.
+
+    Parameters
+    ----------
+    tracers : int
+        Tracers in the sheet.
+    rays_per_tracer : int
+        Rays per tracer (``fan²`` for the plane camera).
+    rays_per_batch : int
+        Rays traced per batch.
+    frames : int
+        Frames imaged (1 to 3).
+    max_window : int
+        Largest tracer image window side (pixels).
+    """
+    tracers, rays_per_tracer = int(tracers), int(rays_per_tracer)
+    per_batch = max(1, int(rays_per_batch) // max(rays_per_tracer, 1)) * rays_per_tracer
+    tables = tracers * RENDER_BYTES_PER_TRACER * max(int(frames), 1) / 3
+    window = int(max_window) ** 2 * WINDOW_BYTES_PER_PIXEL
+    check_host(
+        tables + per_batch * RAY_HOST_BYTES + window,
+        f"rendering {tracers:,} tracers x {rays_per_tracer:,} rays "
+        f"({per_batch:,} rays a batch, windows up to {int(max_window)} px)",
+    )
+
+
+def check_synth_memory(grid, frames):
+    """Refuse a ``rimcl field synth`` run on ``grid³`` nodes that cannot fit in memory."""
+    nodes = int(grid) ** 3
+    needed = nodes * (SYNTH_BYTES_PER_NODE + SYNTH_BYTES_PER_NODE_PER_FRAME * int(frames))
+    check_host(needed, f"the solver on a {int(grid)}³ grid with {int(frames)} frames")
