@@ -2,7 +2,7 @@
 
 import click
 
-from rimcl.cli.options import device_option, field_option, handle_errors
+from rimcl.cli.options import COUNT, device_option, field_option, handle_errors
 
 _COLUMNS = (
     ("case", 5, "case"),
@@ -55,7 +55,7 @@ def _format(key, value):
 )
 @click.option(
     "--pixels",
-    type=int,
+    type=COUNT,
     default=8192,
     show_default=True,
     help="Camera pixels across the field of view L (errors are also given in pixels).",

@@ -33,6 +33,11 @@ RAY_HOST_BYTES = 512
 RENDER_BYTES_PER_TRACER = 2048
 #: Host bytes per pixel of one tracer's image window while it is rendered and labelled.
 WINDOW_BYTES_PER_PIXEL = 40
+#: Host bytes per node and frame an import holds: float32 density, float64 gradient.
+IMPORT_BYTES_PER_NODE_PER_FRAME = 4 + 24
+#: Host bytes per node of the one-frame peaks of an import: reading and transposing a
+#: frame, computing its gradient (spectral: complex spectra and float64 components).
+IMPORT_PEAK_BYTES_PER_NODE = 160
 #: Host bytes per grid node of ``rimcl field synth``: the spectral state, four RK4 stages
 #: and the right-hand side's work arrays (measured 425), plus per recorded frame the
 #: float64 density, velocity and gradient (56).
@@ -183,8 +188,8 @@ def _shape_text(shape):
     return f"{n1} x {n2} x {n3} nodes"
 
 
-def check_field_memory(shape, what, device=None, interp="trilinear"):
-    """Refuse to load a field frame of ``shape`` (and upload it) when it cannot fit.
+def check_field_memory(shape, what):
+    """Refuse to load a field frame of ``shape`` when its peak host memory cannot fit.
 
     Parameters
     ----------
@@ -192,17 +197,26 @@ def check_field_memory(shape, what, device=None, interp="trilinear"):
         ``(n3, n2, n1)``.
     what : str
         The frame, for the message.
-    device : pyopencl.Device, optional
-        Also check the upload to this device.
-    interp : str
-        Interpolation, which decides the device layout.
     """
     nodes = _nodes(shape)
-    label = f"{what} ({_shape_text(shape)})"
-    check_host(nodes * FIELD_LOAD_BYTES_PER_NODE, label)
-    if device is not None:
-        per_node = FIELD_DEVICE_BYTES_PER_NODE.get(interp, 16)
-        check_device(nodes * per_node, device, label)
+    check_host(nodes * FIELD_LOAD_BYTES_PER_NODE, f"{what} ({_shape_text(shape)})")
+
+
+def check_field_upload(shape, device, interp="trilinear", what="the field"):
+    """Refuse to upload a field of ``shape`` that does not fit in the device's memory.
+
+    Parameters
+    ----------
+    shape : tuple of 3 int
+        ``(n3, n2, n1)``.
+    device : pyopencl.Device
+    interp : str
+        Interpolation, which decides the device layout.
+    what : str
+        For the message.
+    """
+    per_node = FIELD_DEVICE_BYTES_PER_NODE.get(interp, 16)
+    check_device(_nodes(shape) * per_node, device, f"{what} ({_shape_text(shape)}, {interp})")
 
 
 def check_array_memory(shape, itemsize, what, factor=2):
@@ -262,8 +276,76 @@ def check_render_memory(tracers, rays_per_tracer, rays_per_batch, frames=3, max_
     )
 
 
+def check_import_memory(shape, frames, velocity, what):
+    """Refuse an import of ``frames`` frames of ``shape`` nodes that cannot fit in memory.
+
+    An import holds every frame's density (float32), velocity (float32) and computed
+    density gradient (float64) until the file is written, plus the peak of reading one
+    frame and computing one gradient.
+
+    Parameters
+    ----------
+    shape : tuple of 3 int
+        Nodes kept per frame, ``(n3, n2, n1)``.
+    frames : int
+    velocity : bool
+        Whether velocity is imported too.
+    what : str
+        For the message.
+    """
+    per_frame = IMPORT_BYTES_PER_NODE_PER_FRAME + (12 if velocity else 0)
+    needed = _nodes(shape) * (int(frames) * per_frame + IMPORT_PEAK_BYTES_PER_NODE)
+    check_host(needed, f"{what} ({int(frames)} frames of {_shape_text(shape)})")
+
+
 def check_synth_memory(grid, frames):
     """Refuse a ``rimcl field synth`` run on ``grid³`` nodes that cannot fit in memory."""
     nodes = int(grid) ** 3
     needed = nodes * (SYNTH_BYTES_PER_NODE + SYNTH_BYTES_PER_NODE_PER_FRAME * int(frames))
     check_host(needed, f"the solver on a {int(grid)}³ grid with {int(frames)} frames")
+
+
+def rays_per_tracer(camera, fan, pupil_rays):
+    """Rays each tracer sends: ``fan²`` for the plane camera, ``pupil_rays`` for the pupil."""
+    return int(fan) ** 2 if camera == "plane" else int(pupil_rays)
+
+
+def check_render_request(
+    field,
+    *,
+    tracers,
+    camera="plane",
+    fan=32,
+    pupil_rays=1024,
+    rays_per_batch=1 << 17,
+    frames=3,
+    max_window=512,
+    interp="trilinear",
+    device=None,
+):
+    """Refuse, before any work, a render run that cannot fit in host or device memory.
+
+    Checks the field frame (read from the file's metadata), the tracer tables and one
+    ray batch on the host, and the field upload on ``device``.
+
+    Parameters
+    ----------
+    field : str, Path or None
+        Field file (None: the shipped sample).
+    tracers, camera, fan, pupil_rays, rays_per_batch, frames, max_window, interp
+        As :func:`rimcl.measure.run_render`.
+    device : pyopencl.Device, optional
+        Also check the field upload to this device.
+    """
+    from rimcl.flow import sample_path
+    from rimcl.flow.fieldfile import FieldFile
+
+    path = sample_path() if field is None else field
+    with FieldFile(path) as source:
+        shape = source.shape
+    check_field_memory(shape, f"a frame of {path}")
+    check_render_memory(
+        tracers, rays_per_tracer(camera, fan, pupil_rays), rays_per_batch, frames, max_window
+    )
+    if device is not None:
+        check_field_upload(shape, device, interp, f"the field of {path}")

@@ -780,6 +780,46 @@ class FieldFile:
         )
 
 
+#: The Gladstone–Dale case of a density file when none is given (air).
+DEFAULT_CASE = "C1"
+
+
+def case_arguments(path=None, case=None, k_rho=None):
+    """The ``case`` and ``k_rho`` to use with a field file, from its metadata.
+
+    A file storing ``delta_n`` carries its own refractive index and takes neither (giving
+    one is refused); a density file takes the given case or ``K*rho``, else
+    :data:`DEFAULT_CASE`.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        Field file; None is the shipped sample.
+    case : str, optional
+    k_rho : float, optional
+
+    Returns
+    -------
+    case, k_rho : str or None, float or None
+    """
+    if path is None:
+        from rimcl.flow import sample_path
+
+        path = sample_path()
+    with FieldFile(path) as ff:
+        kind = ff.kind
+    if kind == "delta_n":
+        if case is not None or k_rho is not None:
+            raise RimclError(
+                f"{path} stores delta_n (its own refractive index); a case or K*rho does not "
+                "apply"
+            )
+        return None, None
+    if case is None and k_rho is None:
+        return DEFAULT_CASE, None
+    return case, k_rho
+
+
 def load_field(path=None, frame=0, *, k_rho=None, case=None, time=None):
     """Load one frame (or a time between frames) of a field file as a :class:`rimcl.Field`.
 
