@@ -208,6 +208,9 @@ def render(
         pupil_rays=pupil_rays,
         frames=frames,
         max_window=max_window,
+        pixels=pixels,
+        psf_sigma=psf_sigma,
+        frame_image=frame_image is not None,
         interp=interp,
     )
     result = run_render(

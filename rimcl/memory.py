@@ -38,6 +38,8 @@ IMPORT_BYTES_PER_NODE_PER_FRAME = 4 + 24
 #: Host bytes per node of the one-frame peaks of an import: reading and transposing a
 #: frame, computing its gradient (spectral: complex spectra and float64 components).
 IMPORT_PEAK_BYTES_PER_NODE = 160
+#: Host bytes per pixel of a full frame image: 16-bit counts and the sum of a window.
+FRAME_IMAGE_BYTES_PER_PIXEL = 4
 #: Host bytes per grid node of ``rimcl field synth``: the spectral state, four RK4 stages
 #: and the right-hand side's work arrays (measured 425), plus per recorded frame the
 #: float64 density, velocity and gradient (56).
@@ -245,8 +247,17 @@ def check_trace_memory(rays, what="tracing"):
     check_host(rays * RAY_HOST_BYTES, f"{what} {rays:,} rays")
 
 
-def check_render_memory(tracers, rays_per_tracer, rays_per_batch, frames=3, max_window=512):
-    """Refuse a render run whose tracer tables or one ray batch cannot fit in memory.
+def check_render_memory(
+    tracers,
+    rays_per_tracer,
+    rays_per_batch,
+    frames=3,
+    max_window=512,
+    pixels=None,
+    psf_sigma=0.0,
+    frame_image=False,
+):
+    """Refuse a render run whose tracer tables, one ray batch or images cannot fit.
 
     Tracers are traced in batches of ``max(1, rays_per_batch // rays_per_tracer)``, so a
     batch holds at least one tracer's rays; the per-tracer tables of every frame are held
@@ -264,15 +275,29 @@ def check_render_memory(tracers, rays_per_tracer, rays_per_batch, frames=3, max_
         Frames imaged (1 to 3).
     max_window : int
         Largest tracer image window side (pixels).
+    pixels : int, optional
+        Pixels across the field of view: a window never spans more than the frame and its
+        point-spread margin; with ``frame_image`` the whole frame is held.
+    psf_sigma : float
+        Point-spread σ (pixels).
+    frame_image : bool
+        A full frame image (16 bits per pixel) is kept.
     """
     tracers, rays_per_tracer = int(tracers), int(rays_per_tracer)
     per_batch = max(1, int(rays_per_batch) // max(rays_per_tracer, 1)) * rays_per_tracer
     tables = tracers * RENDER_BYTES_PER_TRACER * max(int(frames), 1) / 3
-    window = int(max_window) ** 2 * WINDOW_BYTES_PER_PIXEL
+    side = float(max_window)
+    if pixels is not None:
+        side = min(side, float(pixels) + 8 * float(psf_sigma) + 2)
+    images = side**2 * WINDOW_BYTES_PER_PIXEL
+    if frame_image and pixels is not None:
+        images += float(pixels) ** 2 * FRAME_IMAGE_BYTES_PER_PIXEL
     check_host(
-        tables + per_batch * RAY_HOST_BYTES + window,
+        tables + per_batch * RAY_HOST_BYTES + images,
         f"rendering {tracers:,} tracers x {rays_per_tracer:,} rays "
-        f"({per_batch:,} rays a batch, windows up to {int(max_window)} px)",
+        f"({per_batch:,} rays a batch, image windows up to {side:.0f} px"
+        + (f", a {int(pixels)}-pixel frame image" if frame_image and pixels is not None else "")
+        + ")",
     )
 
 
@@ -320,19 +345,23 @@ def check_render_request(
     rays_per_batch=1 << 17,
     frames=3,
     max_window=512,
+    pixels=None,
+    psf_sigma=0.0,
+    frame_image=False,
     interp="trilinear",
     device=None,
 ):
     """Refuse, before any work, a render run that cannot fit in host or device memory.
 
-    Checks the field frame (read from the file's metadata), the tracer tables and one
-    ray batch on the host, and the field upload on ``device``.
+    Checks the field frame (read from the file's metadata), the tracer tables, one ray
+    batch and the images on the host, and the field upload on ``device``.
 
     Parameters
     ----------
     field : str, Path or None
         Field file (None: the shipped sample).
-    tracers, camera, fan, pupil_rays, rays_per_batch, frames, max_window, interp
+    tracers, camera, fan, pupil_rays, rays_per_batch, frames, max_window, pixels, \
+psf_sigma, frame_image, interp
         As :func:`rimcl.measure.run_render`.
     device : pyopencl.Device, optional
         Also check the field upload to this device.
@@ -345,7 +374,14 @@ def check_render_request(
         shape = source.shape
     check_field_memory(shape, f"a frame of {path}")
     check_render_memory(
-        tracers, rays_per_tracer(camera, fan, pupil_rays), rays_per_batch, frames, max_window
+        tracers,
+        rays_per_tracer(camera, fan, pupil_rays),
+        rays_per_batch,
+        frames,
+        max_window,
+        pixels,
+        psf_sigma,
+        frame_image,
     )
     if device is not None:
         check_field_upload(shape, device, interp, f"the field of {path}")

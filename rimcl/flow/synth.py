@@ -32,6 +32,7 @@ import scipy.fft
 
 from rimcl.errors import RimclError
 from rimcl.flow.fieldfile import write_field
+from rimcl.memory import check_synth_memory
 from rimcl.provenance import check_output
 
 RHO_LIGHT = 1.0
@@ -355,6 +356,7 @@ def synthesize(
         raise RimclError("need at least one frame and a positive frame spacing")
     if t_start is not None and not t_start >= 0:
         raise RimclError(f"the start time must be >= 0, got {t_start}")
+    check_synth_memory(grid, frames)
     solver = BoussinesqSolver(grid, reynolds, schmidt, gravity_axis)
     u_hat, rho_hat = solver.initial_state(seed)
     history = {"time": [], "kinetic_energy": [], "density_variance": [], "dissipation": []}
