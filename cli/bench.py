@@ -83,9 +83,12 @@ def bench(out_dir, quick, field_path, cases, interps, precisions, pixels, device
     def split(text):
         return None if text is None else [item.strip() for item in text.split(",") if item]
 
-    click.echo("  ".join(title.ljust(width) for _, width, title in _COLUMNS))
+    shown = []
 
     def show(row):
+        if not shown:  # the header comes with the first row, not before a refusal
+            click.echo("  ".join(title.ljust(width) for _, width, title in _COLUMNS))
+        shown.append(row)
         cells = [_format(key, row[key]).ljust(width) for key, width, _ in _COLUMNS]
         click.echo("  ".join(cells).rstrip())
 

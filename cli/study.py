@@ -13,6 +13,7 @@ from rimcl.cli.options import (
     handle_errors,
 )
 from rimcl.cli.stats import echo_case_lines
+from rimcl.errors import RimclError
 
 
 def _case_list(_ctx, _param, value):
@@ -117,7 +118,12 @@ def study(
         "integrator.step": step,
         "run.device": device_spec,
     }
-    scene = load_scene(scene_file, overrides)
+    try:
+        scene = load_scene(scene_file, overrides)
+    except UnicodeDecodeError:
+        raise RimclError(
+            f"scene file {scene_file} is not text (a TOML scene is UTF-8 text)"
+        ) from None
     result = run_study(
         scene,
         out_dir,

@@ -780,6 +780,12 @@ class FieldFile:
         )
 
 
+def field_kind(path):
+    """What a field file stores, ``"density"`` or ``"delta_n"`` (metadata only)."""
+    with FieldFile(path) as ff:
+        return ff.kind
+
+
 #: The Gladstone–Dale case of a density file when none is given (air).
 DEFAULT_CASE = "C1"
 
@@ -806,13 +812,10 @@ def case_arguments(path=None, case=None, k_rho=None):
         from rimcl.flow import sample_path
 
         path = sample_path()
-    with FieldFile(path) as ff:
-        kind = ff.kind
-    if kind == "delta_n":
+    if field_kind(path) == "delta_n":
         if case is not None or k_rho is not None:
             raise RimclError(
-                f"{path} stores delta_n (its own refractive index); a case or K*rho does not "
-                "apply"
+                f"{path} stores delta_n (its own refractive index); a case or K*rho does not apply"
             )
         return None, None
     if case is None and k_rho is None:
