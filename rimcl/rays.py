@@ -5,6 +5,7 @@ A ray set is either the paper's fan (random tracers in the light sheet, each wit
 from a file. The output file holds one row per ray.
 """
 
+import warnings
 from pathlib import Path
 
 import h5py
@@ -63,12 +64,16 @@ def _csv_rays(path):
         first = text.readline()
     header = tuple(cell.strip().lower() for cell in first.split(",")) == RAY_CSV_COLUMNS
     try:
-        table = np.loadtxt(path, delimiter=",", comments="#", ndmin=2, skiprows=int(header))
+        with warnings.catch_warnings():  # an empty file is reported below, as an error
+            warnings.simplefilter("ignore", UserWarning)
+            table = np.loadtxt(path, delimiter=",", comments="#", ndmin=2, skiprows=int(header))
     except ValueError as exc:
         raise RimclError(
             f"{path}: a ray CSV holds 6 numbers a line, after an optional header line "
             f"{','.join(RAY_CSV_COLUMNS)} ({str(exc).splitlines()[0]})"
         ) from None
+    if table.size == 0:
+        raise RimclError(f"{path} holds no rays")
     if table.shape[1] != len(RAY_CSV_COLUMNS):
         raise RimclError(f"{path}: a ray CSV needs 6 columns {','.join(RAY_CSV_COLUMNS)}")
     return {"origins": table[:, :3], "directions": table[:, 3:]}

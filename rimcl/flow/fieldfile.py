@@ -311,7 +311,8 @@ def real_numbers(path, where, value, count=None):
     """
     array = np.asarray(value)
     if array.dtype.kind not in _REAL_KINDS:
-        raise RimclError(f"{path}: {where} must be real numbers, got {array.dtype} {value!r}")
+        wanted = "a real number" if count == 1 else "real numbers"
+        raise RimclError(f"{path}: {where} must be {wanted}, got {array.dtype} {value!r}")
     array = array.astype(np.float64).reshape(-1)
     if count is not None and array.size != count:
         wanted = "one number" if count == 1 else f"{count} numbers"

@@ -205,6 +205,12 @@ class _Layout:
                     f"--crop leaves {max(stop - start, 0)} node(s) along x{k + 1} "
                     f"(DNS {letter}, {counts[letter]} nodes); at least 2 are needed"
                 )
+            kept = len(range(start, stop, stride[k]))
+            if kept < 2:
+                raise RimclError(
+                    f"--stride {stride[k]} keeps {kept} node of the {stop - start} along "
+                    f"x{k + 1} (DNS {letter}); at least 2 are needed"
+                )
             self.ranges[letter] = slice(start, stop, stride[k])
         self.selection = tuple(self.ranges[letter] for letter in ("z", "y", "x"))
         # transpose (nz, ny, nx) into (n3, n2, n1)
