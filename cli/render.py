@@ -190,7 +190,7 @@ def render(
                    --view-angle 10 -o pupil.h5
       rimcl render --tracers 50 --frame-image frame.png -o look.h5
     """
-    from rimcl.device import describe_device
+    from rimcl.device import describe_device, select_device
     from rimcl.flow.fieldfile import case_arguments
     from rimcl.measure import check_frame_image, run_render, write_frame_image, write_render
     from rimcl.memory import check_render_request
@@ -200,6 +200,7 @@ def render(
     if frame_image is not None:
         check_frame_image(frame_image, overwrite)
     case, k_rho = case_arguments(field_path, case, k_rho)
+    device = select_device(device_spec)
     check_render_request(
         field_path,
         tracers=tracers,
@@ -212,6 +213,7 @@ def render(
         psf_sigma=psf_sigma,
         frame_image=frame_image is not None,
         interp=interp,
+        device=device,
     )
     result = run_render(
         field_path,
@@ -241,7 +243,7 @@ def render(
         start_frame=start_frame,
         margin=margin,
         frame_image=frame_image is not None,
-        device=device_spec,
+        device=device,
         progress=True,
     )
     write_render(output, result, overwrite=overwrite)

@@ -313,6 +313,7 @@ def _check_resources(scene):
     """Refuse, before anything is written, a scene whose geometry does not fit its field
     or whose sizes do not fit in memory."""
     from rimcl.camera import Scene
+    from rimcl.device import select_device
     from rimcl.flow import sample_path
     from rimcl.flow.fieldfile import FieldFile
     from rimcl.memory import check_render_request
@@ -340,6 +341,7 @@ def _check_resources(scene):
         pixels=renderer["pixels"],
         psf_sigma=renderer["psf_sigma"],
         interp=scene["integrator"]["interp"],
+        device=select_device(scene["run"]["device"] or None),
     )
 
 
