@@ -94,9 +94,9 @@ def _h5_rays(path):
 
 
 def _npz_rays(path):
-    from rimcl.flow.jhtdb import npz_array
+    from rimcl.flow.jhtdb import npz_array, open_npz
 
-    with np.load(path, allow_pickle=False) as data:
+    with open_npz(path) as data:
         return {
             name: npz_array(data, path, name) for name in ("origins", "directions") if name in data
         }

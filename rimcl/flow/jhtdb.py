@@ -21,6 +21,7 @@ import contextlib
 import dataclasses
 import math
 import re
+import zipfile
 from pathlib import Path
 
 import h5py
@@ -488,13 +489,7 @@ def read_npz(
     ImportedFlow
     """
     path = Path(path)
-    try:
-        archive = np.load(path, allow_pickle=False)
-    except Exception as exc:
-        raise RimclError(f"{path} is not a readable .npz file ({exc})") from None
-    if not isinstance(archive, np.lib.npyio.NpzFile):
-        raise RimclError(f"{path} is a single .npy array, not a .npz archive of named arrays")
-    with archive:
+    with open_npz(path) as archive:
         if "density" not in archive:
             raise RimclError(f"{path} has no 'density' array (found: {sorted(archive.files)})")
         density = _finite(npz_array(archive, path, "density"), f"{path}: density")
@@ -545,6 +540,29 @@ def read_npz(
         boundary=_boundary(boundary, spacing, nodes, period),
         attrs=layout.provenance("npz", [path], wanted),
     )
+
+
+def open_npz(path):
+    """An ``.npz`` archive opened without pickles; anything else is one line of error.
+
+    Returns
+    -------
+    numpy.lib.npyio.NpzFile
+        A context manager.
+    """
+    path = Path(path)
+    if not zipfile.is_zipfile(path):
+        with open(path, "rb") as start:
+            single = start.read(6) == b"\x93NUMPY"
+        raise RimclError(
+            f"{path} is "
+            + ("a single .npy array" if single else "not a zip archive")
+            + ", not a .npz archive of named arrays"
+        )
+    try:
+        return np.load(path, allow_pickle=False)
+    except Exception as exc:
+        raise RimclError(f"{path} is not a readable .npz file ({exc})") from None
 
 
 def npz_array(archive, path, name):
