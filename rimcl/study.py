@@ -18,8 +18,8 @@ A study directory holds:
   Written last, so its presence (newer than every case file) means the study is complete
   and a rerun only reads ``stats.json``.
 
-``stats.json`` and ``summary.md`` always come from case files of the scene in
-``scene.toml``: when a forced run changes the scene, they are removed before the new
+``stats.json``, ``figures/`` and ``summary.md`` always come from case files of the scene
+in ``scene.toml``: when a forced run changes the scene, they are removed before the new
 ``scene.toml`` is written. Partial files (``.<name>.<random>.part``) left by a killed run
 are removed by the next one.
 
@@ -32,6 +32,7 @@ import contextlib
 import dataclasses
 import json
 import re
+import shutil
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -362,9 +363,10 @@ class _SceneFile:
             with contextlib.suppress(RimclError):
                 previous = _comparable(_read_scene_file(self.path))
         if previous != _comparable(self.scene):
-            # the statistics describe another scene's case files: never beside this one
+            # statistics and figures of another scene's case files: never beside this one
             for name in ("summary.md", "stats.json"):
                 (self.path.parent / name).unlink(missing_ok=True)
+            shutil.rmtree(self.path.parent / "figures", ignore_errors=True)
         _write_text(self.path, self.text)
 
 
