@@ -50,11 +50,13 @@ SYNTH_BYTES_PER_NODE_PER_FRAME = 64
 def format_bytes(count):
     """``count`` bytes as a short human-readable size (``"3.2 GiB"``)."""
     count = float(count)
-    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
-        if abs(count) < 1024 or unit == "PiB":
+    if not count < 1024**6:  # beyond any machine: the plain number says it best
+        return f"{count:.2g} bytes"
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB"):
+        if count < 1024:
             return f"{count:.0f} {unit}" if unit == "bytes" else f"{count:.1f} {unit}"
         count /= 1024
-    return f"{count:.1f} PiB"  # pragma: no cover - the loop always returns
+    return f"{count:.1f} PiB"
 
 
 def _read_number(path, pattern=None):
@@ -284,7 +286,8 @@ def check_render_memory(
         A full frame image (16 bits per pixel) is kept.
     """
     tracers, rays_per_tracer = int(tracers), int(rays_per_tracer)
-    per_batch = max(1, int(rays_per_batch) // max(rays_per_tracer, 1)) * rays_per_tracer
+    batch_tracers = min(max(1, int(rays_per_batch) // max(rays_per_tracer, 1)), tracers)
+    per_batch = batch_tracers * rays_per_tracer
     tables = tracers * RENDER_BYTES_PER_TRACER * max(int(frames), 1) / 3
     side = float(max_window)
     if pixels is not None:

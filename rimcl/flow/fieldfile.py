@@ -363,7 +363,8 @@ class FieldFile:
     def __init__(self, path):
         self.path = Path(path)
         if not self.path.is_file():
-            raise RimclError(f"field file {self.path} does not exist")
+            problem = "is not a regular file" if self.path.exists() else "does not exist"
+            raise RimclError(f"field file {self.path} {problem}")
         try:
             self._h5 = h5py.File(self.path, "r")
         except Exception as exc:
