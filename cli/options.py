@@ -6,7 +6,7 @@ import math
 
 import click
 
-from rimcl.errors import RimclError
+from rimcl.errors import RimclError, first_line
 
 #: Longest error line printed (a message quoting a huge value is cut).
 _LONGEST_MESSAGE = 400
@@ -160,8 +160,7 @@ def describe_failure(exc):
     elif isinstance(exc, OSError) and exc.strerror:
         text = exc.strerror + (f": {exc.filename}" if exc.filename else "")
     else:
-        detail = (str(exc).strip().splitlines() or ["no details"])[0]
-        text = f"{type(exc).__name__}: {detail} (rimcl -v shows where)"
+        text = f"{type(exc).__name__}: {first_line(exc)} (rimcl -v shows where)"
     text = " ".join(text.split())
     if len(text) > _LONGEST_MESSAGE:
         text = text[: _LONGEST_MESSAGE - 1] + "…"

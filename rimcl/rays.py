@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 
 from rimcl.camera import PlaneCamera, Scene, seed_tracers
-from rimcl.errors import RimclError
+from rimcl.errors import RimclError, first_line
 from rimcl.field import AnalyticField
 from rimcl.memory import check_array_memory
 from rimcl.provenance import atomic_path, stamp_h5, to_json
@@ -70,7 +70,7 @@ def _csv_rays(path):
     except ValueError as exc:
         raise RimclError(
             f"{path}: a ray CSV holds 6 numbers a line, after an optional header line "
-            f"{','.join(RAY_CSV_COLUMNS)} ({str(exc).splitlines()[0]})"
+            f"{','.join(RAY_CSV_COLUMNS)} ({first_line(exc)})"
         ) from None
     if table.size == 0:
         raise RimclError(f"{path} holds no rays")
@@ -121,8 +121,7 @@ def read_rays(path):
     except RimclError:
         raise
     except Exception as exc:  # text, zip and HDF5 errors of a damaged or foreign file
-        detail = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        raise RimclError(f"cannot read rays from {path}: {detail}") from None
+        raise RimclError(f"cannot read rays from {path}: {first_line(exc)}") from None
     missing = {"origins", "directions"} - set(arrays)
     if missing:
         raise RimclError(f"{path} lacks {', '.join(sorted(missing))}")

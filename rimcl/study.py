@@ -38,7 +38,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from rimcl import __version__
-from rimcl.errors import RimclError
+from rimcl.errors import RimclError, first_line
 from rimcl.provenance import atomic_path
 from rimcl.scene import load_scene, render_arguments, scene_text
 
@@ -274,8 +274,7 @@ def check_case_file(path, scene, case):
     except RimclError as exc:
         return f"unreadable or incomplete ({exc})"
     except Exception as exc:  # whatever h5py raises for a damaged file
-        detail = (str(exc).strip().splitlines() or [""])[0]
-        return f"damaged ({type(exc).__name__}: {detail})"
+        return f"damaged ({type(exc).__name__}: {first_line(exc)})"
     if tables.case != case:
         return f"holds case {tables.case!r}, not {case!r}"
     recorded = tables.provenance.get("config", {}).get(SCENE_RECORD)

@@ -25,7 +25,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rimcl.errors import RimclError
+from rimcl.errors import RimclError, first_line
 from rimcl.field import BOUNDARIES, Field
 from rimcl.flow.cases import resolve_k_rho
 from rimcl.memory import check_array_memory, check_field_memory
@@ -227,12 +227,6 @@ _LARGEST_COORDINATE = 1e18
 _FRAME_ARRAYS = {"density": (), "delta_n": (), "density_gradient": (3,), "velocity": (3,)}
 
 
-def _first_line(exc):
-    """The first line of an exception's text (h5py errors can span several)."""
-    text = str(exc).strip().splitlines()
-    return text[0] if text else type(exc).__name__
-
-
 def check_hdf5_object(path, parent, name, kind):
     """An object of an HDF5 file, checked to be what a reader expects, or None if absent.
 
@@ -258,7 +252,7 @@ def check_hdf5_object(path, parent, name, kind):
         link = parent.get(name, getlink=True)
     except Exception as exc:  # h5py raises KeyError, RuntimeError or OSError by damage
         raise RimclError(
-            f"{where} cannot be read ({_first_line(exc)}); the file is damaged"
+            f"{where} cannot be read ({first_line(exc)}); the file is damaged"
         ) from None
     if link is None:
         return None
@@ -270,7 +264,7 @@ def check_hdf5_object(path, parent, name, kind):
         found = parent.get(name)
     except Exception as exc:
         raise RimclError(
-            f"{where} cannot be opened ({_first_line(exc)}); the file is damaged"
+            f"{where} cannot be opened ({first_line(exc)}); the file is damaged"
         ) from None
     if found is None:
         target = link.path if isinstance(link, h5py.SoftLink) else "?"
@@ -296,7 +290,7 @@ def _attr(path, obj, name):
         return obj.attrs[name]
     except Exception as exc:
         raise RimclError(
-            f"{path}: attribute {name!r} of {obj.name} cannot be read ({_first_line(exc)})"
+            f"{path}: attribute {name!r} of {obj.name} cannot be read ({first_line(exc)})"
         ) from None
 
 
@@ -369,7 +363,7 @@ class FieldFile:
             self._h5 = h5py.File(self.path, "r")
         except Exception as exc:
             raise RimclError(
-                f"{self.path} is not a readable HDF5 file ({_first_line(exc)})"
+                f"{self.path} is not a readable HDF5 file ({first_line(exc)})"
             ) from None
         try:
             self._read_layout()
@@ -380,7 +374,7 @@ class FieldFile:
             self._h5.close()
             raise RimclError(
                 f"{self.path}: cannot read the file's layout ({type(exc).__name__}: "
-                f"{_first_line(exc)}); the file is damaged"
+                f"{first_line(exc)}); the file is damaged"
             ) from None
         self._plane_cache = {}
 
@@ -528,7 +522,7 @@ class FieldFile:
             values = dataset[selection] if selection else dataset[()]
         except Exception as exc:  # damaged chunks or B-trees surface as several h5py errors
             raise RimclError(
-                f"{self.path}: cannot read {where} ({_first_line(exc)}); the file is damaged"
+                f"{self.path}: cannot read {where} ({first_line(exc)}); the file is damaged"
             ) from None
         if not np.all(np.isfinite(values)):
             raise RimclError(f"{self.path}: {where} holds NaN or inf")

@@ -28,7 +28,7 @@ import h5py
 import numpy as np
 
 from rimcl.derivatives import gradient as compute_gradient
-from rimcl.errors import RimclError
+from rimcl.errors import RimclError, first_line
 from rimcl.flow.fieldfile import check_hdf5_object, real_numbers, write_field
 from rimcl.memory import check_array_memory, check_import_memory
 from rimcl.provenance import check_output
@@ -308,9 +308,8 @@ def _read_values(path, dataset, selection=()):
     try:
         return dataset[selection] if selection else dataset[()]
     except Exception as exc:
-        detail = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise RimclError(
-            f"{path}: cannot read {dataset.name} ({detail}); the file is damaged"
+            f"{path}: cannot read {dataset.name} ({first_line(exc)}); the file is damaged"
         ) from None
 
 
@@ -327,7 +326,7 @@ def _scan_cutout(path, inventory, coordinates):
             found = _member_names(h5)
         except Exception as exc:
             raise RimclError(
-                f"{path}: cannot list its datasets ({exc}); the file is damaged"
+                f"{path}: cannot list its datasets ({first_line(exc)}); the file is damaged"
             ) from None
         variables = [(n, _VARIABLE.match(n.rsplit("/", 1)[-1])) for n in found]
         variables = [(n, m) for n, m in variables if m]
