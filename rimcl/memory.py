@@ -31,7 +31,8 @@ RAY_HOST_BYTES = 512
 #: Host bytes per tracer of a render run with 3 frames: reference and measured images,
 #: tracks, the assembled per-frame tables (measured about 1 kB).
 RENDER_BYTES_PER_TRACER = 2048
-#: Host bytes per pixel of one tracer's image window while it is rendered and labelled.
+#: Host bytes per pixel of one tracer's image window while it is rendered and labelled
+#: (an estimate: float64 sums and weights, counts, labels and masks).
 WINDOW_BYTES_PER_PIXEL = 40
 #: Host bytes per node and frame an import holds: float32 density, float64 gradient.
 IMPORT_BYTES_PER_NODE_PER_FRAME = 4 + 24
@@ -155,30 +156,26 @@ def check_host(needed, what):
         )
 
 
-def check_device(needed, device, what, largest=None):
-    """Refuse an upload to an OpenCL device that exceeds its memory.
+def check_device(needed, device, what):
+    """Refuse an upload to an OpenCL device that exceeds its memory or its largest buffer.
 
     Parameters
     ----------
     needed : int or float
-        Bytes on the device in all.
+        Bytes of the one buffer uploaded.
     device : pyopencl.Device
     what : str
         What is uploaded, for the message.
-    largest : int or float, optional
-        Bytes of the largest single buffer (checked against ``CL_DEVICE_MAX_MEM_ALLOC_SIZE``);
-        default ``needed``.
     """
-    largest = needed if largest is None else largest
     name = device.name.strip()
     if needed > device.global_mem_size:
         raise RimclError(
             f"{what} needs about {format_bytes(needed)} of device memory, but {name} has "
             f"{format_bytes(device.global_mem_size)}"
         )
-    if largest > device.max_mem_alloc_size:
+    if needed > device.max_mem_alloc_size:
         raise RimclError(
-            f"{what} needs one buffer of {format_bytes(largest)}, but the largest buffer "
+            f"{what} needs one buffer of {format_bytes(needed)}, but the largest buffer "
             f"{name} allows is {format_bytes(device.max_mem_alloc_size)}"
         )
 

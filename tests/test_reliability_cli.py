@@ -14,8 +14,10 @@ from click.testing import CliRunner
 import rimcl.bench
 import rimcl.flow.info
 from rimcl.cli.main import cli
+from rimcl.errors import RimclError
 from rimcl.field import Field
 from rimcl.flow.fieldfile import write_field
+from rimcl.memory import check_field_upload
 from rimcl.rays import read_rays
 from rimcl.trace import STATUS_NAMES, _finish, trace_rays
 
@@ -307,3 +309,20 @@ def test_field_info_reads_metadata_only_and_streams_values_on_request(huge_decla
     info = rimcl.flow.info.describe_field_file(huge_declared)
     assert info["memory_bytes_per_frame"]["field_trilinear"] == 16 * 1024**3
     assert "frames" not in info and "delta_n_max" not in info
+
+
+class _SmallDevice:
+    """The memory figures of an OpenCL device with 8 GiB, at most 2 GiB per buffer."""
+
+    name = "small device "
+    global_mem_size = 8 * 2**30
+    max_mem_alloc_size = 2 * 2**30
+
+
+def test_field_uploads_are_checked_against_the_device():
+    check_field_upload((512, 512, 512), _SmallDevice(), "trilinear")  # 2.0 GiB: fits
+    with pytest.raises(RimclError, match=r"needs one buffer of 3\.2 GiB.* allows is 2\.0 GiB"):
+        check_field_upload((600, 600, 600), _SmallDevice(), "trilinear")
+    check_field_upload((1024, 1024, 512), _SmallDevice(), "bspline3")  # 4 bytes a node
+    with pytest.raises(RimclError, match=r"16\.0 GiB of device memory, but small device has 8"):
+        check_field_upload((1024, 1024, 1024), _SmallDevice(), "texture")
