@@ -518,6 +518,11 @@ class FieldFile:
         where = f"{name} of frame {group.name}"
         if not selection:
             check_array_memory(dataset.shape, 4, f"reading {where} of {self.path}", factor=3)
+        elif dataset.chunks is not None:
+            # HDF5 decompresses whole chunks, however small the part read
+            check_array_memory(
+                dataset.chunks, dataset.dtype.itemsize, f"one chunk of {where} of {self.path}"
+            )
         try:
             values = dataset[selection] if selection else dataset[()]
         except Exception as exc:  # damaged chunks or B-trees surface as several h5py errors

@@ -305,6 +305,10 @@ def _dataset(path, h5, name):
 
 def _read_values(path, dataset, selection=()):
     """Values of a dataset; a damaged one is one line of error."""
+    if dataset.chunks is not None:  # HDF5 decompresses whole chunks, however little is read
+        check_array_memory(
+            dataset.chunks, dataset.dtype.itemsize, f"one chunk of {path}: {dataset.name}"
+        )
     try:
         return dataset[selection] if selection else dataset[()]
     except Exception as exc:
