@@ -37,10 +37,8 @@ def run(*args):
     return CliRunner().invoke(cli, [str(arg) for arg in args])
 
 
-@pytest.fixture(scope="module")
-def huge_declared(tmp_path_factory):
+def declare_huge_field(path, chunks):
     """A few kB on disk declaring one 1024³ float32 frame (4 GiB) of fill values."""
-    path = tmp_path_factory.mktemp("huge") / "huge.h5"
     with h5py.File(path, "w") as h5:
         h5.attrs["rimcl_schema"] = "field"
         h5.attrs["schema_version"] = 1
@@ -49,11 +47,15 @@ def huge_declared(tmp_path_factory):
         grid.attrs["spacing"] = np.ones(3)
         frame = h5.create_group("frames/0000")
         frame.attrs["time"] = 0.0
-        frame.create_dataset(
-            "density", shape=(1024,) * 3, dtype="f4", chunks=(1, 1024, 1024), fillvalue=1.0
-        )
+        frame.create_dataset("density", shape=(1024,) * 3, dtype="f4", chunks=chunks,
+                             fillvalue=1.0)  # fmt: skip
     assert path.stat().st_size < 64 * 1024
     return path
+
+
+@pytest.fixture(scope="module")
+def huge_declared(tmp_path_factory):
+    return declare_huge_field(tmp_path_factory.mktemp("huge") / "huge.h5", (1, 1024, 1024))
 
 
 def _limited(*args):
@@ -91,6 +93,12 @@ def test_a_tiny_file_declaring_a_huge_grid_is_refused_under_a_memory_limit(huge_
     assert info["shape_n3_n2_n1"] == [1024] * 3 and "frames" not in info
     assert info["storage"]["density"]["declared_bytes"] == 4 * 1024**3
     assert info["storage"]["density"]["stored_bytes"] < 64 * 1024
+    # streaming the values is bounded too: a chunk too large to decompress is refused
+    chunky = declare_huge_field(tmp_path / "chunky.h5", (512, 1024, 1024))
+    done = _limited("field", "info", "--values", chunky)
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    assert "one chunk of density of frame /frames/0000" in done.stderr
+    assert "needs about 4.0 GiB of memory" in done.stderr
 
 
 @pytest.mark.parametrize(
