@@ -22,7 +22,7 @@ from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
 
 from rimcl import __version__
 from rimcl.provenance import atomic_path, to_json
-from rimcl.stats import (
+from rimcl.tables import (
     angle_deg,
     area_changes,
     density_estimate,
