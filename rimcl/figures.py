@@ -226,31 +226,41 @@ def _draw_pdf_series(ax, series, edges, colors, xlabel, legend=True):
         ax.legend(fontsize=6)
 
 
-def _errorbar_with_interval(ax, x, value, interval, absolute, **style):
-    """One point with its 95 % interval; with ``absolute``, ``|value|`` on a log axis.
+def _errorbars(ax, xs, values, intervals, absolute, **style):
+    """Points with their 95 % intervals; with ``absolute``, ``|value|`` on a log axis.
 
-    An interval that holds 0 cannot be drawn below ``|value|`` on a log axis: the bar
-    then goes up only and the marker is an open triangle pointing down.
+    An interval that holds 0 cannot be drawn below ``|value|`` on a log axis: its bar
+    then goes up only and its marker is an open triangle pointing down. One call of
+    ``errorbar`` per kind of point (drawing them one by one is slow).
 
     Returns
     -------
     bool
-        Whether the interval holds zero.
+        Whether any interval holds zero.
     """
-    shown = abs(value) if absolute else value
-    if interval is None:
-        ax.plot([x], [shown], linestyle="none", **style)
-        return False
-    low, high = interval
-    holds_zero = absolute and low <= 0 <= high
-    if absolute:
-        low, high = (0.0, max(abs(low), abs(high))) if holds_zero else sorted((abs(low), abs(high)))
-    below = 0.0 if holds_zero else max(shown - low, 0.0)
-    above = max(high - shown, 0.0)
-    if holds_zero:
-        style = {**style, "marker": "v", "mfc": "white"}
-    ax.errorbar([x], [shown], yerr=[[below], [above]], capsize=2, linestyle="none", **style)
-    return holds_zero
+    groups = {False: ([], [], [], []), True: ([], [], [], [])}
+    for x, value, interval in zip(xs, values, intervals, strict=True):
+        shown = abs(value) if absolute else value
+        if interval is None:
+            low = high = shown
+            holds_zero = False
+        else:
+            low, high = interval
+            holds_zero = absolute and low <= 0 <= high
+            if absolute:
+                low, high = (shown, max(-low, high)) if holds_zero else sorted(map(abs, interval))
+        group = groups[bool(holds_zero)]
+        for column, number in zip(
+            group, (x, shown, max(shown - low, 0.0), max(high - shown, 0.0)), strict=True
+        ):
+            column.append(number)
+    for holds_zero, (x, shown, below, above) in groups.items():
+        if x:
+            extra = {"marker": "v", "mfc": "white"} if holds_zero else {}
+            ax.errorbar(
+                x, shown, yerr=[below, above], capsize=2, linestyle="none", **{**style, **extra}
+            )
+    return bool(groups[True][0])
 
 
 def _statistic_against_g(
@@ -279,9 +289,8 @@ def _statistic_against_g(
         shown = [abs(v) if absolute else v for v in values]
         line = ax.plot(xs, shown, "-", lw=1, **{k: v for k, v in style.items() if k != "marker"})
         color = line[0].get_color()
-        for x, value, interval in zip(xs, values, intervals, strict=True):
-            marker_style = {"color": color, "marker": style.get("marker", "o"), "ms": 4}
-            any_zero |= _errorbar_with_interval(ax, x, value, interval, absolute, **marker_style)
+        marker_style = {"color": color, "marker": style.get("marker", "o"), "ms": 4}
+        any_zero |= _errorbars(ax, xs, values, intervals, absolute, **marker_style)
         ax.plot([], [], "-" + style.get("marker", "o"), color=color, ms=4, label=label)
         data.append({"label": label, "G": g_values, "value": values, "ci95": intervals})
     ax.set_xscale("log")
@@ -794,18 +803,17 @@ def _convergence(cases):
                 all_sizes.update(ns)
                 marker = "^" if flagged else "o"
                 ax.plot(ns, np.abs(values), "-", color=color, lw=1)
-                for n, value, interval in zip(ns, values, intervals, strict=True):
-                    _errorbar_with_interval(
-                        ax,
-                        n,
-                        value,
-                        interval,
-                        True,
-                        color=color,
-                        marker=marker,
-                        ms=4,
-                        mfc="white" if flagged else color,
-                    )
+                _errorbars(
+                    ax,
+                    ns,
+                    values,
+                    intervals,
+                    True,
+                    color=color,
+                    marker=marker,
+                    ms=4,
+                    mfc="white" if flagged else color,
+                )
                 if flagged:
                     growing.append(case["name"])
                 series.append(
@@ -1105,6 +1113,9 @@ def _save(figure, name, data, stats, out_dir, overwrite):
         path = out_dir / f"{name}.{extension}"
         with atomic_path(path, overwrite=overwrite) as tmp:
             figure.savefig(tmp, format=extension, metadata=metadata)
+        # the layout found for the first file serves the next (same size): solving it
+        # again costs as much as drawing
+        figure.set_layout_engine("none")
         written.append(path)
     path = out_dir / f"{name}.json"
     document = {"figure": name, **data, "config": stats["config"], "versions": stats["versions"]}
@@ -1264,18 +1275,17 @@ def draw_dt_sweep(stats_by_dt):
                     continue
                 dts, values, intervals = zip(*points, strict=True)
                 ax.plot(dts, values, "-" if kind == "refraction" else "--", color=color, lw=1)
-                for dt, value, interval in zip(dts, values, intervals, strict=True):
-                    _errorbar_with_interval(
-                        ax,
-                        dt,
-                        value,
-                        interval,
-                        True,
-                        color=color,
-                        marker=marker,
-                        ms=4,
-                        mfc=color if kind == "refraction" else "white",
-                    )
+                _errorbars(
+                    ax,
+                    dts,
+                    values,
+                    intervals,
+                    True,
+                    color=color,
+                    marker=marker,
+                    ms=4,
+                    mfc=color if kind == "refraction" else "white",
+                )
         ax.set_xscale("log")
         ax.set_yscale("log")
         _ticks_at(ax.xaxis, data["dt"])

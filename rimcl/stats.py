@@ -954,7 +954,7 @@ def budget_verdict(case):
         larger, smaller = ("imaging", "optics") if imaging >= optics else ("optics", "imaging")
         words.append(f"{larger} {max(optics, imaging) / min(optics, imaging):.2g}× {smaller}")
     if parts["total"] > 0:
-        words.append(f"baseline {parts['baseline'] / parts['total']:.2g}× the refraction error")
+        words.append(f"baseline {parts['baseline'] / parts['total']:.2g}× refraction")
     area = case.get("area_change_peak")
     if dominant == "imaging" and area is not None:
         words.append(
