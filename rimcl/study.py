@@ -34,7 +34,6 @@ import json
 import re
 import shutil
 import time
-from datetime import datetime, timezone
 from pathlib import Path
 
 from rimcl import __version__
@@ -42,6 +41,7 @@ from rimcl.config import DEFAULT_PSF_SIGMA, MeasureConfig
 from rimcl.errors import RimclError, first_line
 from rimcl.provenance import atomic_path
 from rimcl.scene import load_scene, scene_text
+from rimcl.summary import summary_markdown
 
 #: Scene keys that do not change the measurement: a study may resume with other values.
 RUN_ONLY_KEYS = (("run", "device"), ("run", "rays_per_batch"))
@@ -54,41 +54,6 @@ DELTA_N_CASE = "delta_n"
 #: Frames every study case images (positions, velocity, acceleration).
 # a partial file of rimcl.provenance.atomic_path: "." + name + "." + 8 random chars + ".part"
 _PART_FILE = re.compile(r"^\..+\.[A-Za-z0-9_]{8}\.part$")
-
-PAPER_SOURCE = (
-    "H. Li, A. Fischer, M. Avila, D. Xu, *Measurement error of tracer-based velocimetry in "
-    "single-phase turbulent flows with inhomogeneous refractive indices*"
-)
-#: The paper's values for air (C1) and water (C4), as its text states them, with where.
-#: Relative errors in percent; the position error is an order of magnitude only.
-PAPER_VALUES = {
-    "C1": {
-        "fluid": "air",
-        "delta_n_max": "2.40e-5",
-        "position_peak_over_L": "O(1e-4)",
-        "velocity_systematic": "≈ 0.2 %",
-        "velocity_random": "≈ 2 %",
-        "acceleration_systematic": "≈ 1 %",
-        "acceleration_random": "≈ 300 %",
-    },
-    "C4": {
-        "fluid": "water",
-        "delta_n_max": "2.85e-2",
-        "position_peak_over_L": "O(1e-2)",
-        "velocity_systematic": "≈ 10 %",
-        "velocity_random": "≈ 2000 %",
-        "acceleration_systematic": "≈ 500 %",
-        "acceleration_random": "≈ 1e5 %",
-    },
-}
-PAPER_CITATIONS = (
-    "Δn_max: Table 2 (tab:cases). Position error: Sec. 4.2 (sec:position), 'for the air "
-    "flow (C1), the magnitudes of position error are up to O(10^-4 L) ... for the water "
-    "flow (C4) ... O(10^-2 L)'. Velocity: Sec. 4.3 (sec:velocity), mean and standard "
-    "deviation of ε_u3/u3, 'approximately 0.2 % and about 2 %' (air), '10 %' and 'about "
-    "2000 %' (water). Acceleration: Sec. 4.4 (sec:acceleration), 'about 1 % and 300 %' "
-    "(air), 'about 500 % and 10^5 %' (water); also the Conclusions."
-)
 
 
 @dataclasses.dataclass
@@ -489,176 +454,3 @@ def write_study_outputs(out_dir, scene, case_files, figures=True):
     write_json(out_dir / "stats.json", stats, overwrite=True)
     _write_text(out_dir / "summary.md", summary_markdown(stats, scene))
     return stats
-
-
-def _percent(value):
-    return "n/a" if value is None else f"{100 * value:.3g} %"
-
-
-def _number(value):
-    return "n/a" if value is None else f"{value:.3g}"
-
-
-def _case_row(case):
-    velocity, acceleration = case["velocity"]["u3"], case["acceleration"]["a3"]
-    return [
-        case["name"],
-        _number(case["G"]),
-        _number(case["delta_n_max"]),
-        f"{case['n_used']}/{case['n_tracers']}",
-        _number(case["position_error_peak_over_L"]),
-        _percent(velocity["systematic"]),
-        _percent(velocity["random"]),
-        _percent(acceleration["systematic"]),
-        _percent(acceleration["random"]),
-    ]
-
-
-def _table(header, rows):
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return lines
-
-
-def summary_markdown(stats, scene):
-    """The study's summary table as Markdown, beside the paper's values for air and water.
-
-    Parameters
-    ----------
-    stats : dict
-        The ``stats.json`` document.
-    scene : dict
-        The scene of the study.
-
-    Returns
-    -------
-    str
-    """
-    cases = stats["cases"]
-    first = cases[0]
-    camera = scene["camera"]
-    rays = (
-        f"plane camera, {camera['fan']}×{camera['fan']} rays per tracer"
-        if camera["kind"] == "plane"
-        else f"pupil camera, {camera['pupil_rays']} rays per tracer"
-    )
-    field = scene["field"]["path"] or "the shipped 64³ sample (buoyancy-driven mixing)"
-    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    devices = ", ".join(
-        sorted({str(entry.get("device", {}).get("device")) for entry in stats["config"]["inputs"]})
-    )
-    lines = [
-        f"# rimcl study: {len(cases)} cases",
-        "",
-        f"rimcl {__version__}, {stamp}. Field: {field}. {scene['tracers']['count']} tracers, "
-        f"{rays}, {scene['renderer']['kind']} renderer, {scene['renderer']['pixels']} pixels "
-        f"across the field of view (pixel = {first['pixel_size_over_L']:.3g} L), "
-        f"L = {first['length_L']:.4g}, Δt = {first['dt']:.3g}.",
-        f"Device: {devices}. Configuration: `scene.toml`; every number and the software "
-        "versions: `stats.json`; figures with their data: `figures/`.",
-        "",
-        "## Results",
-        "",
-        "Errors from refraction only: position `ε_x = x' − x^ref`, velocity "
-        "`ε_u = u' − u^ref`, acceleration `ε_a = a' − a^ref` (measured through the field "
-        "minus measured through a uniform medium). *Systematic* = mean of `ε/truth`, "
-        "*random* = its standard deviation (the paper's definitions), for the `x3` "
-        "components, in percent (`stats.json` holds fractions).",
-        "",
-    ]
-    header = [
-        "case",
-        "G = Kρ",
-        "Δn_max",
-        "tracers used",
-        "position-error peak / L",
-        "u3 systematic",
-        "u3 random",
-        "a3 systematic",
-        "a3 random",
-    ]
-    lines += _table(header, [_case_row(case) for case in cases])
-    lines += [
-        "",
-        "The random errors are standard deviations of ratios whose denominators come "
-        "close to zero for some tracers: they are dominated by the few slowest tracers. "
-        "The robust companions below do not have that weakness. Where `rms(ε_u)/rms(u)` "
-        "grows more slowly than G, the velocity error is mostly the rounding noise of the "
-        "10-bit images (a few 1e-4 px per frame), not refraction. *Baseline* is the error "
-        "of finite differences and rendering without refraction (`u^ref − u`, "
-        "`a^ref − a`), which every PTV measurement has.",
-        "",
-    ]
-    header = [
-        "case",
-        "u3: median, IQR",
-        "rms(ε_u)/rms(u)",
-        "baseline rms(ε_u)/rms(u)",
-        "a3: median, IQR",
-        "rms(ε_a)/rms(a)",
-        "baseline rms(ε_a)/rms(a)",
-    ]
-    rows = []
-    for case in cases:
-        u3, a3 = case["velocity"]["u3"], case["acceleration"]["a3"]
-        rows.append(
-            [
-                case["name"],
-                f"{_percent(u3['median'])}, {_percent(u3['iqr'])}",
-                _percent(u3["rms_normalized"]),
-                _percent(case["baseline"]["velocity"]["u3"]["rms_normalized"]),
-                f"{_percent(a3['median'])}, {_percent(a3['iqr'])}",
-                _percent(a3["rms_normalized"]),
-                _percent(case["baseline"]["acceleration"]["a3"]["rms_normalized"]),
-            ]
-        )
-    lines += _table(header, rows)
-    excluded = [
-        f"{case['name']}: "
-        + (", ".join(f"{n} {name}" for name, n in case["n_excluded"].items() if n) or "none")
-        for case in cases
-    ]
-    lines += ["", "Tracers left out (a tracer may carry several flags): " + "; ".join(excluded)]
-    lines += [
-        "",
-        "## Against the paper (air C1, water C4)",
-        "",
-        "**The flows differ.** The paper traced a 1024³ JHTDB direct numerical simulation "
-        "of homogeneous buoyancy-driven turbulence (Re = 12500) over its own depth L, with "
-        "1e5 tracers, 100×100 rays each and 8192² pixels; this study uses the field, depth "
-        "and sizes above. Only orders of magnitude and trends with G can agree; no "
-        "agreement of the numbers themselves is expected.",
-        "",
-    ]
-    by_name = {case["name"]: case for case in cases}
-    header = [
-        "",
-        "Δn_max",
-        "position-error peak / L",
-        "velocity systematic",
-        "velocity random",
-        "acceleration systematic",
-        "acceleration random",
-    ]
-    rows = []
-    for name, paper in PAPER_VALUES.items():
-        rows.append(
-            [
-                f"paper, {paper['fluid']} ({name})",
-                paper["delta_n_max"],
-                paper["position_peak_over_L"],
-                paper["velocity_systematic"],
-                paper["velocity_random"],
-                paper["acceleration_systematic"],
-                paper["acceleration_random"],
-            ]
-        )
-        case = by_name.get(name)
-        if case is None:
-            rows.append([f"rimcl, {name}", *["not run"] * 6])
-        else:
-            row = _case_row(case)
-            rows.append([f"rimcl, {name}", row[2], row[4], *row[5:]])
-    lines += _table(header, rows)
-    lines += ["", f"Paper: {PAPER_SOURCE}. Where: {PAPER_CITATIONS}", ""]
-    return "\n".join(lines)

@@ -139,7 +139,8 @@ def test_check_case_file_names_why_a_file_cannot_be_kept(finished, device, tmp_p
             del h5["acceleration"][name]
             h5["acceleration"][name] = values[:4]
     reason = check_case_file(short, scene, "C0")
-    assert reason == "incomplete (acceleration has 4 rows, the scene needs 6)"
+    wanted = scene["tracers"]["count"] * (scene["time"]["frames"] - 2)
+    assert reason == f"incomplete (acceleration has 4 rows, the scene needs {wanted})"
     unrecorded = _copy(c0, tmp_path / "unrecorded.h5")
     with h5py.File(unrecorded, "a") as h5:
         config = json.loads(h5.attrs["config"])
@@ -188,8 +189,8 @@ def test_a_failed_scene_does_not_lock_the_directory(device, tmp_path):
     with pytest.raises(RimclError, match=r"the sheet|depth"):
         run_study(outside, out, figures=False)
     assert not out.exists()  # refused before anything was written
-    late = tiny(device, **{"field.start_frame": 1, "cases.names": ["C1"]})
-    with pytest.raises(RimclError, match="need frames up to 3"):
+    late = tiny(device, **{"field.start_frame": 19, "cases.names": ["C1"]})
+    with pytest.raises(RimclError, match="need the field up to"):
         run_study(late, out, figures=False)
     assert not (out / "scene.toml").exists()
     good = tiny(device, **{"cases.names": ["C1"]})
