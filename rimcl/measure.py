@@ -173,6 +173,10 @@ class CaseIndex:
         """The field of a stored frame, or interpolated in time when ``frame`` is None."""
         if self.fluid is None:
             return _load_frame(source, frame, time, self.g)
+        if self.difference == 0:
+            # a uniform fluid images every ray to its tracer whatever its index: traced at
+            # n = 1 (G = 0) it is the reference itself, bit for bit
+            return _load_frame(source, frame, time, 0.0)
         # G = 1 gives δn = ρ - mean ρ and n_ref = 1 + mean ρ: the density, at any time
         unit = _load_frame(source, frame, time, 1.0)
         density = unit.delta_n.astype(np.float64) + (unit.n_ref - 1.0)
