@@ -7,14 +7,30 @@ from rimcl.summary import number, percent
 
 
 def echo_case_lines(stats):
-    """One line per case: tracers used, position-error peak, u3 and a3 errors."""
+    """One line per case: tracers used, position-error peak, and the converging headline
+    rms(ε)/rms(truth) of u3 and a3 (fitted where the tracks allow) with 95 % intervals."""
     for case in stats["cases"]:
-        velocity, acceleration = case["velocity"]["u3"], case["acceleration"]["a3"]
+        g = "" if case["G"] is None else f"G = {case['G']:.3g}, "
+        parts = []
+        for group, component in (
+            ("velocity_fit", "u3"),
+            ("velocity", "u3"),
+            ("acceleration_fit", "a3"),
+            ("acceleration", "a3"),
+        ):
+            if group not in case or any(p.startswith(component) for p in parts):
+                continue
+            summary = case[group][component]
+            interval = summary.get("ci95", {}).get("rms_normalized")
+            shown = percent(summary["rms_normalized"])
+            if interval is not None and None not in interval:
+                shown += f" [{percent(interval[0])}, {percent(interval[1])}]"
+            parts.append(f"{component} {shown}" + (" (fit)" if group.endswith("_fit") else ""))
         click.echo(
-            f"{case['name']:>8}  G = {case['G']:.3g}: {case['n_used']}/{case['n_tracers']} "
-            f"tracers, |ε_x| peak {number(case['position_error_peak_over_L'])} L, "
-            f"u3 {percent(velocity['systematic'])} ± {percent(velocity['random'])}, "
-            f"a3 {percent(acceleration['systematic'])} ± {percent(acceleration['random'])}"
+            f"{case['name']:>8}  {g}Δn_max = {number(case['delta_n_max'])}: "
+            f"{case['n_used']}/{case['n_tracers']} tracers, |ε_x| peak "
+            f"{number(case['position_error_peak_over_L'])} L, rms(ε)/rms(truth): "
+            + ", ".join(parts)
         )
 
 

@@ -81,12 +81,15 @@ KINEMATIC_BLOCKS = (
     ("velocity_fit", "u", "velocity, polynomial fit"),
     ("acceleration_fit", "a", "acceleration, polynomial fit"),
 )
+G_LABEL = "G = Kρ (Gladstone–Dale product)"
+DELTA_N_LABEL = "Δn_max (largest index difference)"
 #: Markers of the cases where shape, not colour, tells them apart.
 CASE_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 
 
 def _case_label(case):
-    return f"{case['name']} (G = {case['G']:.3g})"
+    symbol = "Δn_max" if case.get("abscissa") == "delta_n_max" else "G"
+    return f"{case['name']} ({symbol} = {case['G']:.3g})"
 
 
 def _case_colors(count):
@@ -295,7 +298,7 @@ def _statistic_against_g(
         data.append({"label": label, "G": g_values, "value": values, "ci95": intervals})
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("G = Kρ (Gladstone–Dale product)")
+    ax.set_xlabel(G_LABEL)
     ax.grid(True, which="major", alpha=0.3)
     if any_zero:
         ax.plot([], [], "v", mfc="white", color="k", ms=4, label="95 % interval holds 0")
@@ -1106,7 +1109,16 @@ def draw_figure(name, all_tables, stats):
     data : dict
         ``{"panels": ...}``: every number drawn, by panel and series.
     """
-    figure, data = _BUILDERS[name](all_tables, stats["cases"])
+    cases = stats["cases"]
+    by_index = any(case["G"] is None for case in cases)
+    if by_index:
+        # fluid cases and δn files have no G: every case is placed by its Δn_max instead
+        cases = [{**case, "G": case["delta_n_max"], "abscissa": "delta_n_max"} for case in cases]
+    figure, data = _BUILDERS[name](all_tables, cases)
+    if by_index:
+        for ax in figure.axes:
+            if ax.get_xlabel() == G_LABEL:
+                ax.set_xlabel(DELTA_N_LABEL)
     _finish_axes(figure)
     return figure, data
 

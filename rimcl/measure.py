@@ -685,7 +685,10 @@ def run_render(
         run_config = {
             **setup.key,
             "case": case_index.name,
-            "k_rho": case_index.g,
+            "k_rho": None if math.isnan(case_index.g) else case_index.g,
+            "fluid": None
+            if case_index.fluid is None
+            else {**case_index.fluid.describe(), "difference": case_index.difference},
             "start_frame": int(config.time.start_frame),
             "rays_per_batch": int(config.run.rays_per_batch),
             "ray_sample": int(config.run.ray_sample),
@@ -968,7 +971,7 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
         "rimcl_schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
         "case": config["case"],
-        "k_rho": config["k_rho"],
+        "k_rho": float("nan") if config["k_rho"] is None else config["k_rho"],
         "delta_n_max": delta_n_max,
         "length_L": scene.depth,
         "pixel_size": renderer.pixel_size,

@@ -214,7 +214,9 @@ def _keys():
             "plane",
             "str",
             "plane: rays aimed at a fan x fan grid on the exit plane (the paper); "
-            "pupil: rays over a circular lens aperture",
+            "pupil: rays over a circular aperture (field units); lens: a real camera in "
+            "physical units (focal_length_mm, f_number, magnification, sensor, window; "
+            "pupil_rays rays per tracer; needs field.length_m)",
             choices=choice["camera"],
         ),
         SceneKey(

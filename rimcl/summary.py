@@ -51,7 +51,7 @@ PAPER_CITATIONS = (
 NOT_CONVERGED = "†"
 #: Kinematic quantities of the tables: (stats key, component, heading).
 QUANTITIES = (
-    ("velocity", "u3", "Velocity u3, three-point differences (the paper's)"),
+    ("velocity", "u3", "Velocity u3, forward differences (the paper's)"),
     ("velocity_fit", "u3", "Velocity u3, sliding polynomial fit"),
     ("acceleration", "a3", "Acceleration a3, three-point differences (the paper's)"),
     ("acceleration_fit", "a3", "Acceleration a3, sliding polynomial fit"),
@@ -286,7 +286,7 @@ def summary_markdown(stats, scene):
     rays = (
         f"plane camera, {camera['fan']}×{camera['fan']} rays per tracer"
         if camera["kind"] == "plane"
-        else f"pupil camera, {camera['pupil_rays']} rays per tracer"
+        else f"{camera['kind']} camera, {camera['pupil_rays']} rays per tracer"
     )
     field = scene["field"]["path"] or "the shipped 64³ sample (buoyancy-driven mixing)"
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")

@@ -81,6 +81,9 @@ class CroppedSource:
         ``n_ref`` stays the whole grid's, so ``n`` itself is unchanged by the cut.
         """
         whole = self.source.field(frame) if k_rho is None else self.source.field(frame, k_rho)
+        return self._cut(whole)
+
+    def _cut(self, whole):
         cut = (*self._slices, slice(None))
         return Field.from_arrays(
             whole.delta_n[self._slices],
@@ -91,6 +94,11 @@ class CroppedSource:
             boundary="clamp",
             attrs={**whole.attrs, "box": self.box.tolist()},
         )
+
+    def field_at(self, time, k_rho=None):
+        """The field at any time within the stored frames (interpolated), cut to the box."""
+        arguments = () if k_rho is None else (k_rho,)
+        return self._cut(self.source.field_at(time, *arguments))
 
     def sheet_velocity(self, time, x1):
         """In-plane velocity on the sheet, cut to the box: shape (n3, n2, 2)."""

@@ -1,0 +1,33 @@
+"""The example scenes shipped in data_samples/scenes load and run end to end."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from rimcl.scene import load_scene
+from rimcl.study import run_study
+
+SCENES = sorted((Path(__file__).parents[1] / "data_samples" / "scenes").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", SCENES, ids=[p.stem for p in SCENES])
+def test_shipped_scene_runs(path, device, tmp_path):
+    small = {
+        "tracers.count": 8,
+        "camera.pupil_rays": 64,
+        "time.frames": 3,
+        "time.fit_window": 3,
+        "run.device": device.name,
+    }
+    scene = load_scene(path, small)
+    assert scene["camera"]["kind"] == "lens"
+    result = run_study(scene, tmp_path / "study", figures=False)
+    stats = json.loads((tmp_path / "study" / "stats.json").read_text())
+    fluid_cases = [c for c in stats["cases"] if c["name"].startswith("dT=")]
+    assert fluid_cases and all(c["G"] is None for c in fluid_cases)
+    # a larger temperature difference bends light more
+    medians = [c["optics"]["position_error_median_over_L"] for c in fluid_cases]
+    assert medians == sorted(medians)
+    assert all("water" in c["physical_equivalent"] for c in stats["cases"])
+    assert result.ran == scene["cases"]["names"]
