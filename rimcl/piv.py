@@ -37,6 +37,7 @@ import contextlib
 import dataclasses
 import time
 import warnings
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -46,7 +47,7 @@ from scipy.interpolate import CubicSpline
 from scipy.ndimage import map_coordinates, spline_filter
 
 from rimcl.errors import RimclError
-from rimcl.provenance import atomic_path, stamp_h5, to_json
+from rimcl.provenance import atomic_path, stamp_h5, to_json, versions
 
 SCHEMA = "piv"
 SCHEMA_VERSION = 1
@@ -587,3 +588,80 @@ def write_piv(path, result, config=None, overwrite=True):
         h5["x"].attrs["units"] = h5["y"].attrs["units"] = "px"
         h5["dx"].attrs["units"] = h5["dy"].attrs["units"] = "px"
         stamp_h5(h5, {"piv": result.settings.describe(), **(config or {})})
+
+
+def read_tiff(path):
+    """A grey image from a TIFF file (8- or 16-bit integers, or floats).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    ndarray, shape (rows, columns)
+    """
+    import tifffile
+
+    path = Path(path)
+    if not path.is_file():
+        raise RimclError(f"image {path} does not exist")
+    try:
+        image = tifffile.imread(path)
+    except Exception as exc:  # tifffile raises many types for a bad file
+        raise RimclError(f"{path} is not a readable TIFF image ({exc})") from None
+    if image.ndim != 2:
+        raise RimclError(
+            f"{path} must hold one grey image (2-D), got an array of shape {image.shape}"
+        )
+    if image.dtype.kind not in "uif":
+        raise RimclError(f"{path} holds {image.dtype} pixels; expected integers or floats")
+    return image
+
+
+def write_tiff(path, counts, config=None, overwrite=True):
+    """Write camera counts as a 16-bit grey TIFF, atomically, with config and versions.
+
+    Parameters
+    ----------
+    path : str or Path
+    counts : ndarray, shape (rows, columns)
+        Values in ``[0, 65535]``; row 0 is written first.
+    config : dict, optional
+        Recorded, with the versions, in the TIFF's ImageDescription (JSON).
+    overwrite : bool
+    """
+    import tifffile
+
+    counts = np.asarray(counts)
+    if counts.ndim != 2 or counts.min(initial=0) < 0 or counts.max(initial=0) > 65535:
+        raise RimclError(f"{path}: a 16-bit frame needs 2-D counts in [0, 65535]")
+    note = to_json({"config": config or {}, "versions": versions()})
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        tifffile.imwrite(tmp, counts.astype(np.uint16), photometric="minisblack", description=note)
+
+
+def analyze_files(path_a, path_b, output, settings=None, overwrite=False):
+    """What ``rimcl piv analyze`` does: read two TIFF frames, correlate, write HDF5.
+
+    Parameters
+    ----------
+    path_a, path_b : str or Path
+        Frames A and B.
+    output : str or Path
+        The HDF5 file of :func:`write_piv`.
+    settings : PivSettings, optional
+    overwrite : bool
+
+    Returns
+    -------
+    PivResult
+    """
+    from rimcl.provenance import check_output
+
+    check_output(output, overwrite)
+    image_a, image_b = read_tiff(path_a), read_tiff(path_b)
+    result = analyze_pair(image_a, image_b, settings)
+    inputs = {"image_a": str(Path(path_a).resolve()), "image_b": str(Path(path_b).resolve())}
+    write_piv(output, result, {"inputs": inputs}, overwrite=overwrite)
+    return result

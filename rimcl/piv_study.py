@@ -1,0 +1,404 @@
+"""PIV errors of one refractive-index case: images, vectors, errors, statistics (DESIGN §15).
+
+Per vector of the final PIV grid (pixels; ``dx`` along ``x2``, ``dy`` along ``x3``):
+
+- **refraction** error: the vector measured on the pair seen through the field minus the
+  vector measured on the same tracers seen through a uniform medium;
+- **optics** part of it: the window average (tracers weighted by ``I_A · I_B``, assigned by
+  their true midpoint as the truth is) of the change between exposures of each tracer's
+  mean ray image point, through the field minus through the uniform medium (DESIGN §13:
+  no pixels, no correlation); ``refraction - optics`` is what imaging and correlation add;
+- **baseline**: the uniform-medium vector minus the window-averaged true displacement (the
+  PIV method's own error: finite windows, gradients, lost pairs, sub-pixel fit).
+
+Statistics take the shapes of :mod:`rimcl.stats` (``error_summary`` of the relative errors
+of ``u2``, ``u3`` and ``|u|``, with velocities ``u = d · pixel_size / Δt``), over the vectors
+valid in both measurements whose window holds tracers. A vector replaced by the outlier
+test in either measurement is left out and counted.
+
+The lead's study calls :func:`run_piv_case` once per case, passing the ``reference`` of the
+first case to the others (tracers, truth, uniform-medium frames and vectors are the same
+for every case).
+"""
+
+import dataclasses
+import json
+import math
+import time
+
+import h5py
+import numpy as np
+
+from rimcl.errors import RimclError
+from rimcl.piv import PivSettings, WindowGrid, analyze_pair
+from rimcl.piv_images import run_piv_render, window_means
+from rimcl.provenance import atomic_path, stamp_h5, to_json
+from rimcl.stats import _vector_errors
+
+SCHEMA = "piv_case"
+SCHEMA_VERSION = 1
+#: Per-vector arrays of a case (all of shape (rows, columns) of the final PIV grid).
+VECTOR_COLUMNS = (
+    "x",
+    "y",
+    "dx_field",
+    "dy_field",
+    "dx_uniform",
+    "dy_uniform",
+    "dx_true",
+    "dy_true",
+    "dx_optics",
+    "dy_optics",
+    "peak_ratio_field",
+    "peak_ratio_uniform",
+    "valid_field",
+    "valid_uniform",
+    "truth_weight",
+    "truth_tracers",
+    "used",
+)
+
+
+@dataclasses.dataclass
+class PivCaseReference:
+    """What every case of a study shares: tracers, truth, uniform-medium pair and vectors.
+
+    Attributes
+    ----------
+    render : rimcl.piv_images.PivReference
+    settings : rimcl.piv.PivSettings
+    uniform_vectors : rimcl.piv.PivResult
+    """
+
+    render: object
+    settings: PivSettings
+    uniform_vectors: object
+
+
+@dataclasses.dataclass
+class PivCase:
+    """One case: its images, both vector fields, per-vector errors and statistics.
+
+    Attributes
+    ----------
+    render : rimcl.piv_images.PivRender
+    field_vectors, uniform_vectors : rimcl.piv.PivResult
+    vectors : dict of str to ndarray
+        :data:`VECTOR_COLUMNS`, each (rows, columns); displacements in pixels.
+    stats : dict
+        :func:`case_statistics`.
+    reference : PivCaseReference
+        Pass it to the next case.
+    seconds : dict of str to float
+        Wall time: ``render`` (trace and render), ``piv`` (correlation), ``errors``.
+    """
+
+    render: object
+    field_vectors: object
+    uniform_vectors: object
+    vectors: dict
+    stats: dict
+    reference: PivCaseReference
+    seconds: dict
+
+
+def optics_error(render, grid):
+    """Window averages of the per-tracer optics displacement error (pixels).
+
+    Per tracer: ``(m_B - m_A)`` through the field minus the same through the uniform
+    medium, ``m`` the mean image point of its collected rays. Tracers with no collected ray
+    in any of the four images are left out.
+
+    Parameters
+    ----------
+    render : rimcl.piv_images.PivRender
+    grid : rimcl.piv.WindowGrid
+
+    Returns
+    -------
+    ndarray, float64, shape (rows, columns, 2)
+        ``(dx, dy)`` of the optics part; NaN for a window without tracers.
+    """
+    field, uniform = render.field.optics, render.uniform.optics
+    error = ((field[1] - field[0]) - (uniform[1] - uniform[0])) / render.pixel_size
+    renderer = render.imaging.renderer(render.scene)
+    pixels = renderer.to_pixels(render.reference.positions[..., 1:])
+    middle = 0.5 * (pixels[0] + pixels[1])
+    means, _ = window_means(grid, middle[:, 0], middle[:, 1], error, render.reference.weights)
+    return means
+
+
+def per_vector(render, field_vectors, uniform_vectors):
+    """The per-vector table of a case (:data:`VECTOR_COLUMNS`).
+
+    Parameters
+    ----------
+    render : rimcl.piv_images.PivRender
+    field_vectors, uniform_vectors : rimcl.piv.PivResult
+        On the grid of the truth (same window and overlap).
+
+    Returns
+    -------
+    dict of str to ndarray, each (rows, columns)
+    """
+    truth = render.reference.truth
+    if field_vectors.x.shape != truth["x"].shape or not np.array_equal(field_vectors.x, truth["x"]):
+        raise RimclError(
+            "the PIV vectors and the truth lie on different window grids: analyse with the "
+            "window and overlap the truth was averaged over"
+        )
+    grid = WindowGrid.for_image(
+        field_vectors.image_shape, field_vectors.window, field_vectors.settings.overlap
+    )
+    optics = optics_error(render, grid)
+
+    def usable(result):
+        return result.valid & np.isfinite(result.dx) & np.isfinite(result.dy)
+
+    valid_field, valid_uniform = usable(field_vectors), usable(uniform_vectors)
+    has_truth = (truth["tracers"] > 0) & np.isfinite(truth["dx"]) & np.isfinite(truth["dy"])
+    return {
+        "x": field_vectors.x,
+        "y": field_vectors.y,
+        "dx_field": field_vectors.dx,
+        "dy_field": field_vectors.dy,
+        "dx_uniform": uniform_vectors.dx,
+        "dy_uniform": uniform_vectors.dy,
+        "dx_true": truth["dx"],
+        "dy_true": truth["dy"],
+        "dx_optics": optics[..., 0],
+        "dy_optics": optics[..., 1],
+        "peak_ratio_field": field_vectors.peak_ratio,
+        "peak_ratio_uniform": uniform_vectors.peak_ratio,
+        "valid_field": valid_field,
+        "valid_uniform": valid_uniform,
+        "truth_weight": truth["weight"],
+        "truth_tracers": truth["tracers"],
+        "used": valid_field & valid_uniform & has_truth,
+    }
+
+
+def velocity_table(vectors, pixel_size, dt):
+    """Velocities of the used vectors in the column layout of :mod:`rimcl.stats`.
+
+    Returns
+    -------
+    dict of str to ndarray, 1-D
+        ``u2_true, u3_true`` (window-averaged truth), ``u2_ref, u3_ref`` (uniform medium),
+        ``u2_meas, u3_meas`` (through the field), ``u2_opt, u3_opt`` (uniform-medium vector
+        plus the optics part), in length units per time unit.
+    """
+    used = vectors["used"]
+    factor = pixel_size / dt
+    table = {}
+    for suffix, column in (("true", "true"), ("ref", "uniform"), ("meas", "field")):
+        table[f"u2_{suffix}"] = vectors[f"dx_{column}"][used] * factor
+        table[f"u3_{suffix}"] = vectors[f"dy_{column}"][used] * factor
+    table["u2_opt"] = table["u2_ref"] + vectors["dx_optics"][used] * factor
+    table["u3_opt"] = table["u3_ref"] + vectors["dy_optics"][used] * factor
+    return table
+
+
+def _rms(values):
+    values = np.asarray(values, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    return float(np.sqrt(np.mean(values**2))) if values.size else None
+
+
+def _max_abs(values):
+    values = np.abs(np.asarray(values, dtype=np.float64))
+    values = values[np.isfinite(values)]
+    return float(values.max()) if values.size else None
+
+
+def case_statistics(render, vectors, settings):
+    """Statistics of one case, in the shapes of :func:`rimcl.stats.case_statistics`.
+
+    Returns
+    -------
+    dict
+        ``name, G, delta_n_max, length_L, pixel_size_over_L, dt, n_tracers, n_vectors,
+        n_used, n_excluded`` (by reason), ``velocity`` (refraction error ``u' - u^ref``:
+        ``u2, u3, magnitude`` error summaries and ``angle_deg_median``), ``optics`` (the
+        optics part, same shape), ``baseline`` (``{"velocity": ...}``, ``u^ref - u``),
+        ``displacement_px`` (rms and largest per-vector errors in pixels, by part),
+        ``rays`` (status counts per medium), ``piv`` (settings).
+    """
+    used = vectors["used"]
+    table = velocity_table(vectors, render.pixel_size, render.dt)
+    refraction = np.hypot(
+        vectors["dx_field"] - vectors["dx_uniform"], vectors["dy_field"] - vectors["dy_uniform"]
+    )[used]
+    optics = np.hypot(vectors["dx_optics"], vectors["dy_optics"])[used]
+    baseline = np.hypot(
+        vectors["dx_uniform"] - vectors["dx_true"], vectors["dy_uniform"] - vectors["dy_true"]
+    )[used]
+    imaging = np.hypot(
+        vectors["dx_field"] - vectors["dx_uniform"] - vectors["dx_optics"],
+        vectors["dy_field"] - vectors["dy_uniform"] - vectors["dy_optics"],
+    )[used]
+    truth = np.hypot(vectors["dx_true"], vectors["dy_true"])[used]
+    length = render.scene.depth
+    return {
+        "name": render.case,
+        "G": render.k_rho,
+        "delta_n_max": render.delta_n_max,
+        "length_L": length,
+        "pixel_size_over_L": render.pixel_size / length,
+        "dt": render.dt,
+        "n_tracers": int(render.reference.positions.shape[1]),
+        "n_vectors": int(used.size),
+        "n_used": int(np.count_nonzero(used)),
+        "n_excluded": {
+            "outlier_field": int(np.count_nonzero(~vectors["valid_field"])),
+            "outlier_uniform": int(np.count_nonzero(~vectors["valid_uniform"])),
+            "no_tracers": int(np.count_nonzero(vectors["truth_tracers"] == 0)),
+        },
+        "velocity": _vector_errors(table, "u", "meas", "ref"),
+        "optics": _vector_errors(table, "u", "opt", "ref"),
+        "baseline": {"velocity": _vector_errors(table, "u", "ref", "true")},
+        "displacement_px": {
+            "truth_rms": _rms(truth),
+            "refraction_rms": _rms(refraction),
+            "refraction_max": _max_abs(refraction),
+            "optics_rms": _rms(optics),
+            "imaging_rms": _rms(imaging),
+            "baseline_rms": _rms(baseline),
+        },
+        "rays": {"field": render.field.ray_counts, "uniform": render.uniform.ray_counts},
+        "saturated_pixels": {
+            "field": render.field.saturated_pixels,
+            "uniform": render.uniform.saturated_pixels,
+        },
+        "piv": settings.describe(),
+    }
+
+
+def run_piv_case(field=None, *, case=None, k_rho=None, settings=None, reference=None, **options):
+    """PIV errors of one refractive-index case (module docstring).
+
+    Parameters
+    ----------
+    field : str, Path or FieldFile, optional
+        A rimcl field file with velocity (default: the shipped sample).
+    case, k_rho :
+        The Gladstone–Dale case (``"C0"`` … ``"C4"``, or ``k_rho``; 0 is a uniform medium).
+    settings : rimcl.piv.PivSettings, optional
+        The correlation; its last window and overlap also set the truth's windows.
+    reference : PivCaseReference, optional
+        ``PivCase.reference`` of an earlier case of the same configuration.
+    **options
+        Passed to :func:`rimcl.piv_images.run_piv_render` (``imaging``, camera options,
+        ``start_frame``, ``dt``, ``x_sheet``, ``interp``, ``precision``, ``step``,
+        ``seed``, ``device``...).
+
+    Returns
+    -------
+    PivCase
+    """
+    settings = PivSettings() if settings is None else settings
+    if reference is not None and reference.settings != settings:
+        raise RimclError("the PIV reference was made with other correlation settings")
+    start = time.perf_counter()
+    render = run_piv_render(
+        field,
+        case=case,
+        k_rho=k_rho,
+        window=settings.window,
+        overlap=settings.overlap,
+        reference=None if reference is None else reference.render,
+        **options,
+    )
+    middle = time.perf_counter()
+    if reference is None:
+        uniform_vectors = analyze_pair(*render.uniform.images, settings)
+        reference = PivCaseReference(render.reference, settings, uniform_vectors)
+    field_vectors = analyze_pair(*render.field.images, settings)
+    piv_done = time.perf_counter()
+    vectors = per_vector(render, field_vectors, reference.uniform_vectors)
+    stats = case_statistics(render, vectors, settings)
+    end = time.perf_counter()
+    seconds = {"render": middle - start, "piv": piv_done - middle, "errors": end - piv_done}
+    stats["seconds"] = seconds
+    return PivCase(
+        render=render,
+        field_vectors=field_vectors,
+        uniform_vectors=reference.uniform_vectors,
+        vectors=vectors,
+        stats=stats,
+        reference=reference,
+        seconds=seconds,
+    )
+
+
+def write_piv_case(path, case, overwrite=True):
+    """Write one case's per-vector table and statistics to HDF5 (``rimcl_schema = "piv_case"``).
+
+    Datasets: :data:`VECTOR_COLUMNS` (pixels; ``x`` along ``x2``, ``y`` along ``x3``). Root
+    attributes: ``case``, ``k_rho``, ``dt``, ``pixel_size``, ``stats`` (JSON), ``config``,
+    ``versions``.
+    """
+    with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
+        h5.attrs["rimcl_schema"] = SCHEMA
+        h5.attrs["schema_version"] = SCHEMA_VERSION
+        h5.attrs["case"] = case.render.case
+        h5.attrs["k_rho"] = case.render.k_rho
+        h5.attrs["dt"] = case.render.dt
+        h5.attrs["pixel_size"] = case.render.pixel_size
+        h5.attrs["stats"] = to_json(case.stats)
+        for name in VECTOR_COLUMNS:
+            h5.create_dataset(name, data=case.vectors[name])
+        stamp_h5(h5, case.render.config, case.render.device)
+
+
+def load_piv_case(path):
+    """Read a file of :func:`write_piv_case`.
+
+    Returns
+    -------
+    vectors : dict of str to ndarray
+    stats : dict
+    """
+    try:
+        with h5py.File(path, "r") as h5:
+            schema = h5.attrs.get("rimcl_schema")
+            if schema != SCHEMA:
+                raise RimclError(f"{path} is not a rimcl PIV case file (rimcl_schema {schema!r})")
+            vectors = {name: h5[name][()] for name in VECTOR_COLUMNS}
+            stats = json.loads(h5.attrs["stats"])
+    except OSError as exc:
+        raise RimclError(f"{path} is not a readable HDF5 file ({exc})") from None
+    return vectors, stats
+
+
+def agreement_with_ptv(piv_stats, ptv_stats):
+    """PIV against PTV refraction errors of the same case, side by side.
+
+    Parameters
+    ----------
+    piv_stats : dict
+        :func:`case_statistics` of one case.
+    ptv_stats : dict
+        The ``stats.json`` entry of the same case (:func:`rimcl.stats.case_statistics`).
+
+    Returns
+    -------
+    dict
+        For ``u2, u3, magnitude``: ``rms_normalized`` and ``median`` of each method and the
+        ratio PIV / PTV of ``rms_normalized`` (None where undefined).
+    """
+    result = {}
+    for key in ("u2", "u3", "magnitude"):
+        piv, ptv = piv_stats["velocity"][key], ptv_stats["velocity"][key]
+        ratio = None
+        if piv["rms_normalized"] is not None and ptv["rms_normalized"]:
+            ratio = piv["rms_normalized"] / ptv["rms_normalized"]
+            ratio = ratio if math.isfinite(ratio) else None
+        result[key] = {
+            "piv_rms_normalized": piv["rms_normalized"],
+            "ptv_rms_normalized": ptv["rms_normalized"],
+            "piv_median": piv["median"],
+            "ptv_median": ptv["median"],
+            "ratio_rms_normalized": ratio,
+        }
+    return result
