@@ -139,6 +139,7 @@ def _error_maps(cases):
         norm = None
         if positive.size:
             norm = LogNorm(vmin=max(positive.min(), positive.max() * 1e-5), vmax=positive.max())
+        mesh = None
         for col, ((vectors, stats), values) in enumerate(zip(cases, maps, strict=True)):
             ax = axes[row, col]
             shown = np.where(values > 0, values, np.nan)
@@ -146,7 +147,6 @@ def _error_maps(cases):
                 mesh = ax.pcolormesh(
                     vectors["x"], vectors["y"], shown, norm=norm, cmap="magma", shading="nearest"
                 )
-                figure.colorbar(mesh, ax=ax, label=label)
             else:
                 ax.text(
                     0.5, 0.5, "zero everywhere", ha="center", va="center", transform=ax.transAxes
@@ -156,6 +156,8 @@ def _error_maps(cases):
             ax.set_ylabel("y (px)")
             ax.set_title(f"{part}, {_case_label(stats)}", fontsize=8, loc="right")
             panels[f"{part} {stats['name']}"] = {"magnitude_px": values.tolist()}
+        if mesh is not None:  # one colour scale per row
+            figure.colorbar(mesh, ax=axes[row, :].tolist(), label=label)
     figure.suptitle("Per-vector errors (px): refraction, its optics part, and the PIV baseline")
     return figure, {"panels": panels}
 

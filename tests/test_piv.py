@@ -89,7 +89,7 @@ def test_correlation_peak_of_a_circular_shift_is_exact():
 
 
 def test_empty_window_is_not_a_vector():
-    dx, dy, ratio, found = correlate_windows(np.zeros((1, 16, 16)), np.zeros((1, 16, 16)))
+    *_, ratio, found = correlate_windows(np.zeros((1, 16, 16)), np.zeros((1, 16, 16)))
     assert not found[0] and np.isnan(ratio[0])
 
 
