@@ -455,7 +455,7 @@ def smooth_predictor(values):
     into the next pass (Schrijer & Scarano 2008); the filter damps it. The edges are
     padded by odd reflection, so a linear field passes unchanged everywhere.
     """
-    if min(values.shape) < 2 or not np.all(np.isfinite(values)):
+    if min(values.shape) < 2:
         return values
     padded = np.pad(values, 1, mode="reflect", reflect_type="odd")
     along_x = 0.25 * padded[:, :-2] + 0.5 * padded[:, 1:-1] + 0.25 * padded[:, 2:]
@@ -546,7 +546,8 @@ def analyze_pair(image_a, image_b, settings=None):
         dy = np.where(found, predictor_y + res_y, np.nan)
         outliers = normalized_median_test(dx, dy, settings.outlier_eps, settings.outlier_threshold)
         dx, dy = replace_outliers(dx, dy, outliers)
-        previous = (grid, smooth_predictor(dx), smooth_predictor(dy))
+        # a vector nothing could replace deforms nothing (predictor 0 there)
+        previous = (grid, smooth_predictor(np.nan_to_num(dx)), smooth_predictor(np.nan_to_num(dy)))
         seconds.append(time.perf_counter() - start)
     centre_x, centre_y = np.meshgrid(grid.x.astype(np.float64), grid.y.astype(np.float64))
     return PivResult(

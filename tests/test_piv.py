@@ -93,6 +93,11 @@ def test_empty_window_is_not_a_vector():
     assert not found[0] and np.isnan(ratio[0])
 
 
+def test_blank_pair_gives_no_vectors():
+    result = analyze_pair(np.zeros((64, 64)), np.zeros((64, 64)))
+    assert np.all(np.isnan(result.dx)) and not result.valid.any() and not result.replaced.any()
+
+
 def test_median_test_flags_an_outlier_and_keeps_linear_fields():
     rows, cols = np.mgrid[0:9, 0:11].astype(float)
     dx, dy = 0.3 * rows - 0.1 * cols, 0.05 * cols
