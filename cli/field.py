@@ -29,7 +29,9 @@ def field():
     help="Reynolds number 1/ν (default 400 (N/64)^(4/3): k_max η ≈ 1 at the peak).",
 )
 @click.option("--frames", default=3, show_default=True, help="Frames to record.")
-@click.option("--dt", default=0.005, show_default=True, help="Time between frames (L0/U0).")
+@click.option(
+    "--dt", "--frame-dt", default=0.005, show_default=True, help="Time between frames (L0/U0)."
+)
 @click.option(
     "--gravity",
     type=click.Choice(["x1", "x2", "x3"]),
@@ -49,10 +51,19 @@ def field():
     show_default=True,
     help="Store the spectral density gradient (else readers recompute it).",
 )
+@click.option(
+    "--sheet-velocity",
+    "sheet_x1",
+    type=float,
+    default=None,
+    metavar="X1",
+    help="Store only the in-plane velocity (u2, u3) on the sheet x1 = X1 (small files).",
+)
 @_output_option
 @overwrite_option
 @handle_errors
-def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, output, overwrite):
+def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, sheet_x1, output,
+          overwrite):  # fmt: skip
     """Synthetic buoyancy-driven turbulence (pseudo-spectral Boussinesq solver).
 
     Two fluids (densities 1 and 1.105, Atwood 0.05, Sc 1) start at rest in random blobs
@@ -63,6 +74,8 @@ def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, outpu
     \b
       rimcl field synth --grid 32 --seed 1 -o f32.h5        # seconds
       rimcl field synth --grid 64 -o mixing64.h5            # 30-60 s on 2 cores
+      rimcl field synth --grid 64 --frames 16 --frame-dt 0.02 --sheet-velocity 0 \\
+          --no-gradient -o many.h5                          # density + sheet velocity
     """
     from rimcl.flow.synth import history_table, run_synth
 
@@ -77,6 +90,7 @@ def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, outpu
         gravity_axis=gravity,
         t_start=start_time,
         store_gradient=gradient,
+        sheet_x1=sheet_x1,
         progress=True,
     )
     click.echo(history_table(result))

@@ -96,10 +96,26 @@ from rimcl.cli.options import (
 @step_option
 @click.option(
     "--frames",
-    type=click.IntRange(1, 3),
+    type=click.IntRange(1, 1000),
     default=3,
     show_default=True,
-    help="1: positions; 2: + velocity; 3: + acceleration.",
+    help="Frames imaged; 1: positions; 2: + velocity; 3 or more: + acceleration.",
+)
+@click.option(
+    "--dt",
+    type=click.FloatRange(min=0, min_open=True),
+    default=None,
+    help="Time between imaged frames [default: the field's frame spacing].",
+)
+@click.option(
+    "--fit-window",
+    type=click.IntRange(min=3),
+    default=5,
+    show_default=True,
+    help="Frames of the sliding polynomial fit of each track (odd).",
+)
+@click.option(
+    "--fit-order", type=click.IntRange(min=2), default=2, show_default=True, help="Fit order."
 )
 @click.option("--start-frame", default=0, show_default=True, help="First field frame used.")
 @click.option(
@@ -126,38 +142,7 @@ from rimcl.cli.options import (
 )
 @overwrite_option
 @handle_errors
-def render(
-    field_path,
-    case,
-    k_rho,
-    tracers,
-    camera,
-    fan,
-    pupil_rays,
-    aperture_diameter,
-    focal_length,
-    f_number,
-    camera_distance,
-    view_angle,
-    renderer,
-    pixels,
-    psf_sigma,
-    threshold,
-    centroid_weights,
-    max_window,
-    bit_depth,
-    interp,
-    precision,
-    step,
-    frames,
-    start_frame,
-    margin,
-    frame_image,
-    device_spec,
-    seed,
-    output,
-    overwrite,
-):
+def render(field_path, case, k_rho, step, frame_image, device_spec, output, overwrite, **options):
     """Synthetic PTV: trace each tracer's rays, render its image, centroid it, track it;
     compare with a uniform medium and with the true motion.
 
@@ -169,6 +154,7 @@ def render(
                    --view-angle 10 -o pupil.h5
       rimcl render --tracers 50 --frame-image frame.png -o look.h5
     """
+    from rimcl.config import MeasureConfig
     from rimcl.device import describe_device
     from rimcl.measure import check_frame_image, run_render, write_frame_image, write_render
     from rimcl.provenance import check_output
@@ -177,37 +163,13 @@ def render(
     if frame_image is not None:
         check_frame_image(frame_image, overwrite)
     case = case_or_default(case, k_rho)
-    result = run_render(
-        field_path,
-        case=case,
-        k_rho=k_rho,
-        tracers=tracers,
-        camera=camera,
-        fan=fan,
-        pupil_rays=pupil_rays,
-        aperture_diameter=aperture_diameter,
-        focal_length=focal_length,
-        f_number=f_number,
-        camera_distance=camera_distance,
-        view_angle=view_angle,
-        renderer=renderer,
-        pixels=pixels,
-        psf_sigma=psf_sigma,
-        threshold=threshold,
-        centroid_weights=centroid_weights,
-        max_window=max_window,
-        bit_depth=bit_depth,
-        interp=interp,
-        precision=precision,
+    config = MeasureConfig.from_options(
+        **options,
         step=parse_step(step),
-        seed=seed,
-        frames=frames,
-        start_frame=start_frame,
-        margin=margin,
         frame_image=frame_image is not None,
         device=device_spec,
-        progress=True,
     )
+    result = run_render(field_path, case=case, k_rho=k_rho, config=config, progress=True)
     write_render(output, result, overwrite=overwrite)
     if frame_image is not None:
         write_frame_image(frame_image, result, overwrite=overwrite)

@@ -31,6 +31,16 @@ def _case_list(_ctx, _param, value):
     is_flag=True,
     help="Print the default scene (every key, documented) and exit.",
 )
+@click.option(
+    "--preset",
+    type=click.Choice(["paper"]),
+    help="A named scene under SCENE_FILE's keys; paper: the paper's own imaging (README).",
+)
+@click.option(
+    "--engine",
+    type=click.Choice(["numpy"]),
+    help="Where tracer images are rendered and located [run.engine].",
+)
 @click.option("--force", is_flag=True, help="Redo every case and the statistics.")
 @click.option("--no-figures", is_flag=True, help="Skip the figures (stats and summary only).")
 @click.option(
@@ -64,6 +74,8 @@ def study(
     scene_file,
     out_dir,
     print_default_scene,
+    preset,
+    engine,
     force,
     no_figures,
     field_path,
@@ -109,8 +121,9 @@ def study(
         "integrator.precision": precision,
         "integrator.step": step,
         "run.device": device_spec,
+        "run.engine": engine,
     }
-    scene = load_scene(scene_file, overrides)
+    scene = load_scene(scene_file, overrides, preset=preset)
     result = run_study(
         scene,
         out_dir,

@@ -21,7 +21,7 @@ import numpy as np
 
 from rimcl.errors import RimclError
 
-CAMERAS = ("plane", "pupil")
+CAMERAS = ("plane", "pupil", "lens")
 
 # golden angle (rad): successive points of a Vogel spiral are this far apart in azimuth
 _GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
@@ -353,4 +353,363 @@ class PupilCamera:
             "view_angle_deg": self.view_angle,
             "rays_per_tracer": self.rays_per_tracer,
             "pupil_centre": self.centre.tolist(),
+        }
+
+
+def _number(value):
+    """``float(value)``, or NaN when it is not a number (so range checks reject it)."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _field_units(length_mm, length_m):
+    """A length in mm as field length units (``length_m`` metres per unit)."""
+    return 1e-3 * length_mm / length_m
+
+
+@dataclasses.dataclass(frozen=True)
+class FlatWindow:
+    """A plane-parallel window on the exit plane, between the fluid and the camera.
+
+    Its inner face is the exit plane ``x1 = x_end``, its outer face ``thickness_mm`` beyond;
+    rays refract at both faces (Snell), so a uniform medium images through it with the
+    window's own aberration, which the reference and the measured images then share.
+
+    Attributes
+    ----------
+    thickness_mm : float
+    glass_index : float
+        Refractive index of the window (e.g. 1.52 BK7, 1.49 PMMA).
+    outside_index : float
+        Refractive index of the medium between window and lens (1.0003 air).
+    """
+
+    thickness_mm: float
+    glass_index: float = 1.52
+    outside_index: float = 1.0
+
+    def __post_init__(self):
+        for name in ("thickness_mm", "glass_index", "outside_index"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise RimclError(f"the window's {name} must be positive, got {value!r}")
+
+    def describe(self):
+        return dataclasses.asdict(self)
+
+
+def _refract(directions, ratio):
+    """Snell at a plane of normal ``x1``: unit directions into a medium with
+    ``n_in / n_out = ratio`` (scalar or (K,)). Returns directions, NaN where reflected."""
+    tangential = directions[:, 1:] * np.reshape(ratio, (-1, 1))
+    with np.errstate(invalid="ignore"):
+        normal = np.sqrt(1.0 - np.sum(tangential**2, axis=1))
+    refracted = np.column_stack([normal, tangential])
+    refracted[np.isnan(normal)] = np.nan
+    return refracted
+
+
+@dataclasses.dataclass(frozen=True)
+class LensCamera:
+    """A real camera: a thin lens of given focal length and f-number, focused on the sheet.
+
+    The lens looks along ``-x1`` at the field-of-view centre. Everything follows from the
+    optics (thin lens, Raffel et al., *Particle Image Velocimetry*, ch. 2):
+
+    - magnification ``M = f / (s_o - f)``, object distance ``s_o = f (1 + 1/M)``;
+    - pixel size on the sheet ``p / M`` (``p`` the sensor's pixel pitch);
+    - the pupil, of diameter ``D = f / N`` at ``s_o`` from the (apparent) sheet: a
+      :class:`PupilCamera` decides which rays are collected, since an ideal lens focused on
+      the sheet images every ray to its back-projection ``r'``;
+    - depth of field ``δz = 4 (1 + 1/M)² N² λ``;
+    - tracer image diameter ``d_τ = sqrt((M d_p)² + d_diff²)``, ``d_diff = 2.44 (1 + M) λ N``,
+      on the sensor; the Gaussian PSF has ``σ = d_τ / 4`` (``d_τ`` is read as the e⁻²
+      diameter of a Gaussian, DESIGN §15; the best-fit Gaussian of an Airy disk alone is
+      narrower, ``σ = 0.42 (1 + M) λ N ≈ d_diff / 5.8``).
+
+    With a :class:`FlatWindow`, exit rays refract into the glass and out into the outside
+    medium before the pupil test, and ``r'`` is their backward extension to the plane the
+    lens is focused on: the paraxial image of the sheet through fluid and window,
+    ``x_focus = x_end + t - t n_o / n_g - L1 n_o / n_f`` (:attr:`focus_x1`). The working
+    distance is counted from there, in the outside medium.
+
+    Attributes
+    ----------
+    scene : Scene
+    length_m : float
+        Metres per field length unit (the field's physical size).
+    focal_length_mm, f_number : float
+    magnification : float, optional
+        ``M > 0``; or give ``working_distance_mm`` (``s_o``); the other is derived.
+    working_distance_mm : float, optional
+    pixel_pitch_um : float
+        Sensor pixel pitch (µm).
+    pixels : tuple of 2 int
+        Sensor pixels along ``x2`` and ``x3``.
+    wavelength_nm : float
+        Vacuum wavelength of the light (nm).
+    particle_diameter_um : float
+        Tracer diameter (µm), for the geometric image.
+    fluid_index : float
+        Index of the fluid at the window's inner face (only used with a window).
+    window : FlatWindow, optional
+    rays : int
+        Rays per tracer, spread area-uniformly over the pupil.
+    """
+
+    scene: Scene
+    length_m: float
+    focal_length_mm: float = 50.0
+    f_number: float = 8.0
+    magnification: float = None
+    working_distance_mm: float = None
+    pixel_pitch_um: float = 6.5
+    pixels: tuple = (2048, 2048)
+    wavelength_nm: float = 532.0
+    particle_diameter_um: float = 10.0
+    fluid_index: float = 1.0
+    window: FlatWindow = None
+    rays: int = 1024
+
+    def __post_init__(self):
+        for name in (
+            "length_m",
+            "focal_length_mm",
+            "f_number",
+            "pixel_pitch_um",
+            "wavelength_nm",
+            "fluid_index",
+        ):
+            value = getattr(self, name)
+            if not (np.isfinite(_number(value)) and value > 0):
+                raise RimclError(f"the lens camera's {name} must be positive, got {value!r}")
+        if not (np.isfinite(self.particle_diameter_um) and self.particle_diameter_um >= 0):
+            raise RimclError(
+                f"the particle diameter must be >= 0 µm, got {self.particle_diameter_um!r}"
+            )
+        pixels = tuple(int(p) for p in np.broadcast_to(self.pixels, (2,)))
+        if min(pixels) < 1:
+            raise RimclError(f"the sensor needs at least 1 x 1 pixels, got {self.pixels!r}")
+        object.__setattr__(self, "pixels", pixels)
+        f = self.focal_length_mm
+        if (self.magnification is None) == (self.working_distance_mm is None):
+            raise RimclError("give the lens camera a magnification or a working distance (mm)")
+        if self.magnification is not None:
+            if not (np.isfinite(self.magnification) and self.magnification > 0):
+                raise RimclError(f"the magnification must be positive, got {self.magnification}")
+            object.__setattr__(self, "working_distance_mm", f * (1.0 + 1.0 / self.magnification))
+        else:
+            if not (np.isfinite(self.working_distance_mm) and self.working_distance_mm > f):
+                raise RimclError(
+                    f"the working distance ({self.working_distance_mm} mm) must exceed the "
+                    f"focal length ({f} mm) to form an image"
+                )
+            object.__setattr__(self, "magnification", f / (self.working_distance_mm - f))
+        if int(self.rays) < 1:
+            raise RimclError(f"the lens camera needs at least 1 ray per tracer, got {self.rays}")
+        outer_face = self.scene.x_end + self._thickness
+        if self.focus_x1 + self.object_distance <= outer_face:
+            raise RimclError(
+                f"the lens (working distance {self.working_distance_mm:g} mm = "
+                f"{self.object_distance:g} field units) sits inside the field or the window; "
+                f"it must lie beyond x1 = {outer_face:g}"
+            )
+
+    # --- optics, in physical units --------------------------------------------------------
+    @property
+    def aperture_mm(self):
+        """Entrance pupil diameter ``D = f / N`` (mm)."""
+        return self.focal_length_mm / self.f_number
+
+    @property
+    def numerical_aperture(self):
+        """Object-side numerical aperture ``sin(atan(D / 2 s_o))``."""
+        return float(np.sin(np.arctan(0.5 * self.aperture_mm / self.working_distance_mm)))
+
+    @property
+    def depth_of_field_mm(self):
+        """``δz = 4 (1 + 1/M)² N² λ`` (mm), in the outside medium."""
+        wavelength_mm = 1e-6 * self.wavelength_nm
+        return 4.0 * (1.0 + 1.0 / self.magnification) ** 2 * self.f_number**2 * wavelength_mm
+
+    @property
+    def diffraction_diameter_um(self):
+        """``d_diff = 2.44 (1 + M) λ N`` on the sensor (µm)."""
+        return 2.44 * (1.0 + self.magnification) * 1e-3 * self.wavelength_nm * self.f_number
+
+    @property
+    def image_diameter_um(self):
+        """Tracer image diameter ``sqrt((M d_p)² + d_diff²)`` on the sensor (µm)."""
+        geometric = self.magnification * self.particle_diameter_um
+        return float(np.hypot(geometric, self.diffraction_diameter_um))
+
+    @property
+    def psf_sigma_px(self):
+        """Gaussian PSF ``σ = d_τ / 4`` in sensor pixels."""
+        return self.image_diameter_um / (4.0 * self.pixel_pitch_um)
+
+    # --- geometry, in field units ---------------------------------------------------------
+    @property
+    def pixel_size(self):
+        """Pixel side on the sheet (field length units): the pitch over ``M``."""
+        return _field_units(1e-3 * self.pixel_pitch_um / self.magnification, self.length_m)
+
+    @property
+    def sensor_fov(self):
+        """Field of view the sensor covers on the sheet, ``(x2, x3)`` widths (field units)."""
+        return self.pixel_size * np.asarray(self.pixels, dtype=np.float64)
+
+    @property
+    def object_distance(self):
+        """``s_o`` in field units."""
+        return _field_units(self.working_distance_mm, self.length_m)
+
+    @property
+    def _thickness(self):
+        return 0.0 if self.window is None else _field_units(self.window.thickness_mm, self.length_m)
+
+    @property
+    def focus_x1(self):
+        """The plane the lens is focused on: the paraxial image of the sheet (x1)."""
+        if self.window is None:
+            return self.scene.x_sheet
+        n_out, n_glass = self.window.outside_index, self.window.glass_index
+        return (
+            self.scene.x_end
+            + self._thickness * (1.0 - n_out / n_glass)
+            - self.scene.depth * n_out / self.fluid_index
+        )
+
+    @property
+    def pupil(self):
+        """The entrance pupil as a :class:`PupilCamera` on the ``x1`` axis."""
+        distance = self.focus_x1 - self.scene.x_sheet + self.object_distance
+        return PupilCamera(
+            self.scene, _field_units(self.aperture_mm, self.length_m), distance, 0.0, self.rays
+        )
+
+    @property
+    def rays_per_tracer(self):
+        return int(self.rays)
+
+    def aim_points(self):
+        """Points ``(x1, x2, x3)`` spread area-uniformly over the pupil, shape (K, 3)."""
+        return self.pupil.aim_points()
+
+    def directions(self, tracers):
+        """Unit initial directions that reach the pupil points through a uniform fluid.
+
+        Without a window, straight lines to the pupil points. With one, each direction is
+        solved (Newton, from the paraxial guess) so that the ray refracted by the window
+        reaches its pupil point.
+
+        Parameters
+        ----------
+        tracers : ndarray, shape (N, 2)
+
+        Returns
+        -------
+        ndarray, float64, shape (N, K, 3)
+        """
+        if self.window is None:
+            return self.pupil.directions(tracers)
+        aims = self.aim_points()
+        lateral = aims[None, :, 1:] - np.asarray(tracers, dtype=np.float64)[:, None, :]
+        reach = np.linalg.norm(lateral, axis=-1)
+        # lateral run = Σ depth_i tan θ_i with sin θ_i = ratio_i sin θ (Snell at both faces)
+        depths = np.array(
+            [self.scene.depth, self._thickness, aims[0, 0] - self.scene.x_end - self._thickness]
+        )
+        ratios = np.array(
+            [
+                1.0,
+                self.fluid_index / self.window.glass_index,
+                self.fluid_index / self.window.outside_index,
+            ]
+        )
+        sine = np.minimum(reach / np.sum(depths * ratios), 0.999 / ratios.max())
+        for _ in range(50):  # convex and increasing: Newton from above converges monotonically
+            s = sine[..., None] * ratios
+            cosine = np.sqrt(1.0 - s**2)
+            run = np.sum(depths * s / cosine, axis=-1)
+            slope = np.sum(depths * ratios / cosine**3, axis=-1)
+            sine = sine - (run - reach) / slope
+        unit = np.divide(
+            lateral, reach[..., None], out=np.zeros_like(lateral), where=reach[..., None] > 0
+        )
+        return np.concatenate([np.sqrt(1.0 - sine**2)[..., None], sine[..., None] * unit], axis=-1)
+
+    def through_window(self, end_pos, end_dir, exit_index=None):
+        """Exit rays after the window (unchanged without one).
+
+        Parameters
+        ----------
+        end_pos, end_dir : ndarray, shape (K, 3)
+            Exit points on ``x1 = x_end`` and unit exit directions.
+        exit_index : ndarray, shape (K,), optional
+            Fluid index at each exit point (default :attr:`fluid_index`).
+
+        Returns
+        -------
+        positions, directions : ndarray, shape (K, 3)
+            On the window's outer face, and the unit directions outside; NaN for rays
+            reflected totally.
+        """
+        end_pos = np.asarray(end_pos, dtype=np.float64)
+        end_dir = np.asarray(end_dir, dtype=np.float64)
+        if self.window is None:
+            return end_pos, end_dir
+        n_fluid = self.fluid_index if exit_index is None else np.asarray(exit_index)
+        in_glass = _refract(end_dir, n_fluid / self.window.glass_index)
+        positions = end_pos + (self._thickness / in_glass[:, :1]) * in_glass
+        return positions, _refract(end_dir, n_fluid / self.window.outside_index)
+
+    def collected(self, end_pos, end_dir, exit_index=None):
+        """Which exit rays pass through the pupil (after the window), shape (K,) bool."""
+        with np.errstate(invalid="ignore"):
+            return self.pupil.collected(*self.through_window(end_pos, end_dir, exit_index))
+
+    def image_points(self, end_pos, end_dir, exit_index=None):
+        """Image points ``r'``: the rays' backward extension onto the focus plane.
+
+        Without a window this is the back-projection onto the sheet that
+        :func:`rimcl.trace_rays` returns as ``image_pos``.
+
+        Returns
+        -------
+        ndarray, float64, shape (K, 2)
+            ``(x2, x3)``; NaN for rays that do not leave.
+        """
+        positions, directions = self.through_window(end_pos, end_dir, exit_index)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            run = (positions[:, 0] - self.focus_x1) / directions[:, 0]
+            return positions[:, 1:] - run[:, None] * directions[:, 1:]
+
+    def describe(self):
+        return {
+            "camera": "lens",
+            "length_m": self.length_m,
+            "focal_length_mm": self.focal_length_mm,
+            "f_number": self.f_number,
+            "magnification": self.magnification,
+            "working_distance_mm": self.working_distance_mm,
+            "pixel_pitch_um": self.pixel_pitch_um,
+            "pixels": list(self.pixels),
+            "wavelength_nm": self.wavelength_nm,
+            "particle_diameter_um": self.particle_diameter_um,
+            "aperture_mm": self.aperture_mm,
+            "numerical_aperture": self.numerical_aperture,
+            "depth_of_field_mm": self.depth_of_field_mm,
+            "diffraction_diameter_um": self.diffraction_diameter_um,
+            "image_diameter_um": self.image_diameter_um,
+            "psf_sigma_px": self.psf_sigma_px,
+            "pixel_size": self.pixel_size,
+            "sensor_fov_x2_x3": self.sensor_fov.tolist(),
+            "focus_x1": self.focus_x1,
+            "fluid_index": self.fluid_index,
+            "window": None if self.window is None else self.window.describe(),
+            "rays_per_tracer": self.rays_per_tracer,
+            "pupil_centre": self.pupil.centre.tolist(),
         }

@@ -16,61 +16,42 @@ Output file (``rimcl_schema = "render"``, ``schema_version = 1``), written by
 """
 
 import dataclasses
+import itertools
 import json
 import logging
 import math
-import numbers
 import time
 from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
-from rimcl.camera import CAMERAS, PlaneCamera, PupilCamera, Scene, seed_tracers
-from rimcl.centroid import (
-    CENTROID_WEIGHTS,
-    EXCLUDING,
-    NO_POSITION,
-    NOTES,
-    TracerFlag,
-    flag_names,
-    locate,
-    not_found,
-)
+from rimcl.camera import Scene, seed_tracers
+from rimcl.centroid import EXCLUDING, NOTES, TracerFlag, flag_names
+from rimcl.config import MeasureConfig
 from rimcl.errors import RimclError
 from rimcl.field import Field
+from rimcl.flow.crop import CroppedSource
+from rimcl.imaging import Imaging, empty_columns, image_batch
+from rimcl.media import index_from_density
 from rimcl.provenance import atomic_path, check_output, stamp_h5, to_json
-from rimcl.render import FrameImage, Renderer, quantize, scale_for
+from rimcl.render import FrameImage
+from rimcl.sensor import MEASURED_PASS, REFERENCE_PASS
 from rimcl.trace import STATUS_NAMES, default_step, trace_rays
-from rimcl.track import SheetVelocity, first_difference, integrate_tracks, second_difference
+from rimcl.track import (
+    SheetVelocity,
+    integrate_tracks,
+    second_differences,
+    sliding_fit,
+    track_acceleration,
+    track_velocity,
+)
 
 logger = logging.getLogger(__name__)
 
 SCHEMA = "render"
 SCHEMA_VERSION = 1
 TRACKING_SUBSTEPS = 8  # RK4 steps between frames (error ~1e-9 of the motion at Δt = 0.005)
-DEFAULT_RAYS_PER_BATCH = 1 << 17  # rays traced per batch: ~40 MB of host memory
-DEFAULT_RAY_SAMPLE = 20_000
-
-# per tracer and frame: what one imaging pass (reference or measured) records
-_IMAGE_COLUMNS = {
-    "x2": np.float64,
-    "x3": np.float64,
-    "area": np.int64,
-    "perimeter": np.float64,
-    "circularity": np.float64,
-    "n_rays_ok": np.int64,
-    "flags": np.int64,
-    "peak": np.float64,
-    "scale": np.float64,
-}
-
-
-def _new_images(frames, tracers):
-    return {
-        name: np.full((frames, tracers), np.nan if dtype is np.float64 else 0, dtype=dtype)
-        for name, dtype in _IMAGE_COLUMNS.items()
-    }
 
 
 @dataclasses.dataclass
@@ -83,14 +64,14 @@ class Reference:
         The configuration it was made for (compared when it is reused).
     tracks : ndarray, shape (F, N, 2)
         True tracer positions ``(x2, x3)`` at each frame.
-    true_velocity : ndarray, shape (N, 2) or None
-        Flow velocity ``(u2, u3)`` at ``(x_0, t_0)``; None for a single frame.
+    true_velocity, true_acceleration : ndarray, shape (F, N, 2) or None
+        Flow velocity ``u(x_k, t_k)`` and Lagrangian acceleration ``Du/Dt`` along the true
+        tracks at each frame; None for a single frame.
     outside : ndarray, bool, shape (F, N)
         True positions outside the velocity grid (clamped fields only).
     images : dict of str to ndarray (F, N)
-        Reference image results (``x2, x3, area, perimeter, circularity, n_rays_ok,
-        flags, peak, scale``; ``peak`` is the unclipped brightest pixel in counts, ``scale``
-        the 10-bit factor reused for the measured images).
+        Reference image columns (:data:`rimcl.imaging.IMAGE_COLUMNS`; ``scale`` is the
+        factor reused for the measured images).
     ray_counts : dict of str to int
         Trace status counts of all reference rays, plus ``vignetted``.
     ray_steps : int
@@ -100,6 +81,7 @@ class Reference:
     key: dict
     tracks: np.ndarray
     true_velocity: np.ndarray
+    true_acceleration: np.ndarray
     outside: np.ndarray
     images: dict
     ray_counts: dict
@@ -118,8 +100,10 @@ class RenderResult:
         The full configuration (recorded with versions and device).
     tracers : dict of str to ndarray
         One row per tracer and frame (frame-major: all tracers of frame 0 first).
-    velocity, acceleration : dict of str to ndarray, or None
-        One row per tracer; None with fewer than 2 (3) frames.
+    kinematics : dict of str to (dict of str to ndarray, or None)
+        The tables ``velocity``, ``acceleration`` (the paper's differences),
+        ``velocity_fit`` and ``acceleration_fit`` (sliding polynomial fit): one row per
+        tracer and evaluation frame, frame-major; None where the run has too few frames.
     rays : dict of str to ndarray
         A random subsample of the measured rays of the first frame.
     ray_attrs : dict
@@ -136,8 +120,7 @@ class RenderResult:
     attrs: dict
     config: dict
     tracers: dict
-    velocity: dict
-    acceleration: dict
+    kinematics: dict
     rays: dict
     ray_attrs: dict
     reference: Reference
@@ -160,21 +143,87 @@ def _open_source(field, stack):
     return field, "<in memory>" if path is None else str(Path(path).resolve())
 
 
-def _case_of(source, case, k_rho):
-    """Case name and G; files of δn carry their own index and take neither."""
+@dataclasses.dataclass(frozen=True)
+class CaseIndex:
+    """How one case turns the field file into refractive index.
+
+    Attributes
+    ----------
+    name : str
+        ``C0``…``C4``, ``G=…``, ``dT=…``/``dS=…`` or ``delta_n``.
+    g : float
+        Gladstone–Dale product (NaN for ``delta_n`` files and fluid cases).
+    fluid : rimcl.media.Fluid, optional
+        For a fluid case: the fluid whose ``n(T)`` or ``n(S)`` maps the density.
+    difference : float
+        ``ΔT`` (K) or ``ΔS`` (g/kg) of a fluid case.
+    light, heavy : float
+        The field's two dimensionless densities (fluid cases).
+    """
+
+    name: str
+    g: float
+    fluid: object = None
+    difference: float = 0.0
+    light: float = 1.0
+    heavy: float = 1.105
+
+    def field(self, source, frame, time):
+        """The field of a stored frame, or interpolated in time when ``frame`` is None."""
+        if self.fluid is None:
+            return _load_frame(source, frame, time, self.g)
+        # G = 1 gives δn = ρ - mean ρ and n_ref = 1 + mean ρ: the density, at any time
+        unit = _load_frame(source, frame, time, 1.0)
+        density = unit.delta_n.astype(np.float64) + (unit.n_ref - 1.0)
+        index = index_from_density(
+            density, self.fluid, self.difference, unit.gradient, self.light, self.heavy
+        )
+        return Field.from_arrays(
+            index.delta_n,
+            spacing=unit.spacing,
+            origin=unit.origin,
+            n_ref=index.n_ref,
+            gradient=index.gradient,
+            boundary=unit.boundary,
+            attrs={**unit.attrs, "case": self.name},
+        )
+
+
+def _case_of(source, case, k_rho, fluid_config):
+    """The :class:`CaseIndex` of a case; files of δn carry their own index."""
+    from rimcl.flow.cases import fluid_case, resolve_k_rho
+
     if getattr(source, "kind", "density") == "delta_n":
         if case is not None or k_rho is not None:
             raise RimclError("this field file stores delta_n directly; --case/--k-rho do not apply")
-        return "delta_n", float("nan")
-    from rimcl.flow.cases import resolve_k_rho
+        return CaseIndex("delta_n", float("nan"))
+    difference = None if case is None else fluid_case(case)
+    if difference is None:
+        return CaseIndex(*resolve_k_rho(case, k_rho))
+    fluid = fluid_config.build()
+    if fluid is None:
+        raise RimclError(f"case {case} needs a fluid: set [fluid] kind (water, air, saltwater)")
+    quantity, value = difference
+    if (quantity == "salinity") != (fluid.kind == "saltwater"):
+        raise RimclError(
+            f"case {case}: a {fluid.kind} case varies the {fluid.unit}, not {quantity}"
+        )
+    return CaseIndex(
+        str(case).strip(),
+        float("nan"),
+        fluid,
+        value,
+        float(fluid_config.light_density),
+        float(fluid_config.heavy_density),
+    )
 
-    return resolve_k_rho(case, k_rho)
 
-
-def _load_frame(source, frame, k_rho):
-    if math.isnan(k_rho):
-        return source.field(frame)
-    return source.field(frame, k_rho)
+def _load_frame(source, frame, time, k_rho):
+    """The field of a stored frame, or interpolated in time when ``frame`` is None."""
+    arguments = () if math.isnan(k_rho) else (k_rho,)
+    if frame is None:
+        return source.field_at(time, *arguments)
+    return source.field(frame, *arguments)
 
 
 def _uniform_like(source):
@@ -197,44 +246,202 @@ def _uniform_like(source):
     )
 
 
-def _make_camera(
-    scene,
-    camera,
-    fan,
-    pupil_rays,
-    aperture_diameter,
-    focal_length,
-    f_number,
-    camera_distance,
-    view_angle,
-):
-    if camera not in CAMERAS:
-        raise RimclError(f"unknown camera {camera!r}; choose from {CAMERAS}")
-    if camera == "plane":
-        return PlaneCamera(scene, int(fan))
-    distance = 4.0 * scene.depth if camera_distance is None else float(camera_distance)
-    if aperture_diameter is None and focal_length is None and f_number is None:
-        aperture_diameter = 0.25 * distance
-    return PupilCamera.from_optics(
-        scene,
-        distance,
-        diameter=aperture_diameter,
-        focal_length=focal_length,
-        f_number=f_number,
-        view_angle=float(view_angle),
-        rays=int(pupil_rays),
+@dataclasses.dataclass
+class Setup:
+    """One run's configuration resolved against its field: what every stage shares.
+
+    Attributes
+    ----------
+    source : FieldFile
+        The open field file.
+    scene : rimcl.camera.Scene
+        Sheet, exit plane and field of view.
+    camera : PlaneCamera or PupilCamera
+    imaging : rimcl.imaging.Imaging
+    mie : rimcl.mie.MieWeights or None
+        Ray weights (None: uniform).
+    trace_options : dict
+        ``interp``, ``precision``, ``step`` and ``device`` for :func:`rimcl.trace_rays`.
+    frame_ids : list of int or None
+        Stored frames imaged (None: interpolated in time).
+    time : rimcl.config.TimeConfig
+    times : ndarray, shape (F,)
+    dt : float
+        Time between frames (NaN for one frame).
+    start_positions : ndarray, shape (N, 2)
+        Tracers at the first frame (those of the shard).
+    first_tracer : int
+        Index of the first of them among all tracers of the run.
+    batch : int
+        Tracers traced per batch.
+    key : dict
+        The case-independent configuration (a reusable reference must match it).
+    timings : dict of str to float
+        Seconds per stage, filled as the stages run.
+    """
+
+    source: object
+    scene: Scene
+    camera: object
+    imaging: Imaging
+    mie: object
+    trace_options: dict
+    frame_ids: list
+    time: object
+    times: np.ndarray
+    dt: float
+    start_positions: np.ndarray
+    first_tracer: int
+    batch: int
+    key: dict
+    timings: dict
+
+
+def _shard_range(shard, total):
+    """``(first, stop)`` tracer indices of a shard (None: all ``total`` tracers)."""
+    if shard is None:
+        return 0, total
+    first, stop = (int(v) for v in shard)
+    if not 0 <= first < stop <= total:
+        raise RimclError(f"a shard must be tracers first..stop within 0..{total}, got {shard}")
+    return first, stop
+
+
+def _frames_of(source, time_config):
+    """Frames imaged: stored frame indices (None where interpolated), times and spacing.
+
+    Frame ``k`` is at ``t_0 + k Δt``, ``t_0`` the time of stored frame ``start_frame`` and
+    ``Δt`` the configured spacing (default: the stored spacing there). A time that is a
+    stored frame's (to 1e-9 of ``Δt``) uses it; another is interpolated in time.
+    """
+    frames, start_frame = int(time_config.frames), int(time_config.start_frame)
+    stored = np.asarray(source.times, dtype=np.float64)
+    if not 0 <= start_frame < len(stored):
+        raise RimclError(
+            f"the start frame {start_frame} is not in the field (frames 0..{len(stored) - 1})"
+        )
+    if time_config.dt is not None:
+        dt = float(time_config.dt)
+    elif frames > 1:
+        if start_frame + 1 >= len(stored):
+            raise RimclError(
+                f"{frames} frames from frame {start_frame} need frames up to "
+                f"{start_frame + frames - 1}, but the field has {len(stored)} "
+                f"(0..{len(stored) - 1})"
+            )
+        dt = float(stored[start_frame + 1] - stored[start_frame])
+    else:
+        dt = float("nan")
+    times = stored[start_frame] + dt * np.arange(frames) if frames > 1 else stored[[start_frame]]
+    slack = 1e-9 * (abs(dt) if frames > 1 else 1.0)
+    if times[-1] > stored[-1] + slack:
+        raise RimclError(
+            f"{frames} frames {dt:g} apart from t = {times[0]:g} need the field up to "
+            f"t = {times[-1]:g}, but it ends at t = {stored[-1]:g} "
+            f"({len(stored)} frames, 0..{len(stored) - 1})"
+        )
+    nearest = np.clip(np.searchsorted(stored, times), 0, len(stored) - 1)
+    frame_ids = []
+    for t, j in zip(times, nearest, strict=True):
+        candidates = [i for i in (j - 1, j) if 0 <= i < len(stored)]
+        match = [i for i in candidates if abs(stored[i] - t) <= slack]
+        frame_ids.append(int(match[0]) if match else None)
+    if frames > 1:
+        times = np.array(
+            [stored[f] if f is not None else t for f, t in zip(frame_ids, times, strict=True)]
+        )
+        spacing = np.diff(times)
+        if not np.allclose(spacing, dt, rtol=1e-6, atol=0):
+            raise RimclError(
+                f"frames {frame_ids} are not equally spaced in time ({times.tolist()}); "
+                "differences and fits need equal spacing"
+            )
+    return frame_ids, times, dt
+
+
+def _setup(source, source_name, case_index, config, streams, shard):
+    """Resolve the configuration against the field: scene, camera, imaging, tracers, key."""
+    from rimcl.device import describe_device, select_device
+
+    frame_ids, times, dt = _frames_of(source, config.time)
+    scene = Scene.from_grid(
+        source.origin, source.spacing, source.shape, source.boundary, config.x_sheet, config.depth
     )
+    camera = config.camera.build(scene)
+    sensor = config.sensor.build(config.renderer.bit_depth, config.tracers.seed)
+    imaging = config.renderer.build(scene, camera, sensor)
+    mie = config.mie.build(config.fluid.build())
+    device = select_device(config.run.device)
+    every_tracer = seed_tracers(
+        config.tracers.count,
+        scene,
+        np.random.default_rng(streams[0]),
+        config.tracers.margin,
+    )
+    first, stop = _shard_range(shard, len(every_tracer))
+    integrator = config.integrator
+    trace_options = {
+        "step": integrator.step,
+        "interp": integrator.interp,
+        "precision": integrator.precision,
+        "device": device,
+    }
+    setup = Setup(
+        source=source,
+        scene=scene,
+        camera=camera,
+        imaging=imaging,
+        mie=mie,
+        trace_options=trace_options,
+        frame_ids=frame_ids,
+        time=config.time,
+        times=times,
+        dt=dt,
+        start_positions=every_tracer[first:stop],
+        first_tracer=first,
+        batch=max(1, int(config.run.rays_per_batch) // camera.rays_per_tracer),
+        key={},
+        timings={"track": 0.0, "trace": 0.0, "render": 0.0, "centroid": 0.0},
+    )
+    calibration = None
+    if integrator.interp == "auto":
+        calibration = _calibrate_interp(setup, case_index, every_tracer)
+        trace_options["interp"] = calibration["interp"]
+    setup.key = {
+        "field": source_name,
+        "box": None if config.box is None else [list(pair) for pair in config.box],
+        "grid": {
+            "origin": np.asarray(source.origin).tolist(),
+            "spacing": np.asarray(source.spacing).tolist(),
+            "shape_n3_n2_n1": list(source.shape),
+            "boundary": source.boundary,
+        },
+        "frames": frame_ids,
+        "times": times.tolist(),
+        "scene": scene.describe(),
+        "tracers": len(every_tracer),
+        "shard": [first, stop],
+        "seed": int(config.tracers.seed),
+        "margin": float(config.tracers.margin),
+        "camera": camera.describe(),
+        "render": imaging.describe(),
+        "mie": None if mie is None else mie.describe(),
+        "trace": {
+            "interp": trace_options["interp"],
+            "precision": integrator.precision,
+            "step": None if integrator.step is None else float(integrator.step),
+            "device": describe_device(device),
+        },
+    }
+    return setup, calibration
 
 
 class _Pass:
     """One imaging pass (reference or measured) over all tracers of all frames."""
 
-    def __init__(self, frames, tracers, renderer, threshold, weights, timings):
-        self.images = _new_images(frames, tracers)
-        self.renderer = renderer
-        self.threshold = threshold
-        self.weights = weights
-        self.timings = timings
+    def __init__(self, pass_id, frames, tracers):
+        self.pass_id = pass_id
+        self.images = empty_columns((frames, tracers))
         self.status_counts = np.zeros(len(STATUS_NAMES), dtype=np.int64)
         self.vignetted = 0
         self.ray_steps = 0
@@ -245,86 +452,66 @@ class _Pass:
         counts["vignetted"] = int(self.vignetted)
         return counts
 
-    def image_tracer(self, frame, tracer, points, flags, scale=None, canvas=None):
-        """Render and locate one tracer from the image points ``(K, 2)`` of its rays."""
-        row = self.images
-        row["n_rays_ok"][frame, tracer] = len(points)
-        if len(points) == 0:
-            blob, window, saturated = not_found(flags | TracerFlag.NO_RAYS), None, False
-        else:
-            start = time.perf_counter()
-            pixels = self.renderer.to_pixels(points)
-            window = self.renderer.window_for(pixels)
-            raw, outside = self.renderer.render(pixels, np.ones(len(pixels)), window)
-            if outside:
-                flags |= TracerFlag.RAYS_OUTSIDE_WINDOW
-            full_scale = self.renderer.full_scale
-            if scale is None:  # the reference pass sets each tracer's scale
-                scale = scale_for(raw, full_scale)
-            counts, saturated = quantize(raw, scale, full_scale)
-            row["peak"][frame, tracer] = float(np.max(raw)) * scale
-            middle = time.perf_counter()
-            blob = locate(counts, self.threshold, self.weights)
-            self.timings["render"] += middle - start
-            self.timings["centroid"] += time.perf_counter() - middle
-            if canvas is not None:
-                canvas.add(window, counts)
-        flags |= blob.flags
-        if saturated:
-            flags |= TracerFlag.SATURATED
-        if not blob.flags & NO_POSITION:
-            x2, x3 = self.renderer.to_sheet([window.col0 + blob.col, window.row0 + blob.row])
-            row["x2"][frame, tracer], row["x3"][frame, tracer] = x2, x3
-        row["area"][frame, tracer] = blob.area
-        row["perimeter"][frame, tracer] = blob.perimeter
-        row["circularity"][frame, tracer] = blob.circularity
-        row["flags"][frame, tracer] = int(flags)
-        row["scale"][frame, tracer] = scale if scale is not None else np.nan
 
+def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None):
+    """Trace, render and locate every tracer of one frame, one batch at a time (stage 1–3).
 
-def _image_frame(
-    pass_,
-    frame,
-    field,
-    positions,
-    scene,
-    camera,
-    trace_options,
-    batch,
-    scales=None,
-    canvas=None,
-    sampler=None,
-    bar=None,
-):
-    """Trace, render and centroid every tracer of one frame, one batch at a time."""
+    Parameters
+    ----------
+    setup : Setup
+    pass_ : _Pass
+        Receives the image columns of frame ``frame`` and the ray counts.
+    field : rimcl.Field
+        The refractive-index field of this frame (or the uniform one).
+    positions : ndarray, shape (N, 2)
+        Tracer positions at this frame.
+    scales : ndarray, shape (N,), optional
+        The reference pass's scale factors (None in the reference pass).
+    extras : dict, optional
+        ``sampler`` (a :class:`_RaySampler`), ``canvas`` (a :class:`FrameImage`) and
+        ``bar`` (a progress bar), each optional.
+    """
+    extras = extras or {}
+    camera, scene, timings = setup.camera, setup.scene, setup.timings
     rays = camera.rays_per_tracer
-    for first in range(0, len(positions), batch):
-        ids = np.arange(first, min(first + batch, len(positions)))
+    for first in range(0, len(positions), setup.batch):
+        ids = np.arange(first, min(first + setup.batch, len(positions)))
         origins = np.repeat(scene.in_sheet(positions[ids]), rays, axis=0)
         directions = camera.directions(positions[ids]).reshape(-1, 3)
         start = time.perf_counter()
-        result = trace_rays(field, origins, directions, x_end=scene.x_end, **trace_options)
-        pass_.timings["trace"] += time.perf_counter() - start
+        result = trace_rays(field, origins, directions, x_end=scene.x_end, **setup.trace_options)
+        timings["trace"] += time.perf_counter() - start
         ok = result.status == 0
         collected = ok & camera.collected(result.end_pos, result.end_dir)
         pass_.status_counts += np.bincount(result.status, minlength=len(STATUS_NAMES))
         pass_.vignetted += int(np.count_nonzero(ok & ~collected))
         pass_.ray_steps += int(result.steps.sum())
-        if sampler is not None:
-            sampler.take(ids[0] * rays, result, collected)
-        points = result.image_pos[:, 1:].reshape(len(ids), rays, 2)
+        if extras.get("sampler") is not None:
+            extras["sampler"].take((setup.first_tracer + ids[0]) * rays, result, collected)
         ok = ok.reshape(len(ids), rays)
         collected = collected.reshape(len(ids), rays)
-        for k, tracer in enumerate(ids):
-            flags = TracerFlag(0)
-            if not ok[k].all():
-                flags |= TracerFlag.RAYS_FAILED
-            if (ok[k] & ~collected[k]).any():
-                flags |= TracerFlag.RAYS_VIGNETTED
-            scale = None if scales is None else scales[frame, tracer]
-            pass_.image_tracer(frame, tracer, points[k][collected[k]], flags, scale, canvas)
-        if bar is not None:
-            bar.update(len(ids))
+        flags = np.where(ok.all(axis=1), 0, int(TracerFlag.RAYS_FAILED))
+        flags |= np.where((ok & ~collected).any(axis=1), int(TracerFlag.RAYS_VIGNETTED), 0)
+        if hasattr(camera, "image_points"):  # a lens behind a window images through it
+            points = camera.image_points(result.end_pos, result.end_dir)
+        else:
+            points = result.image_pos[:, 1:]
+        weights = 1.0 if setup.mie is None else setup.mie.weights(directions)
+        columns = image_batch(
+            setup.imaging,
+            points.reshape(len(ids), rays, 2),
+            collected,
+            np.reshape(weights, (len(ids), rays)) if setup.mie is not None else weights,
+            flags,
+            scales=None if scales is None else scales[ids],
+            timings=timings,
+            canvas=extras.get("canvas"),
+            noise=(pass_.pass_id, frame, setup.first_tracer + ids),
+        )
+        for name, values in columns.items():
+            pass_.images[name][frame, ids] = values
+        if extras.get("bar") is not None:
+            extras["bar"].update(len(ids))
 
 
 class _RaySampler:
@@ -378,62 +565,40 @@ def _progress(enabled, total):
     return tqdm(total=total, unit="tracer", desc="render", disable=None)
 
 
-def _true_motion(source, scene, tracers, times, frame_ids):
-    """True tracks ``(F, N, 2)``, velocity at ``(x_0, t_0)`` and the outside-grid mask."""
+def _true_motion(source, scene, tracers, times):
+    """True tracks ``(F, N, 2)``, velocity and acceleration along them (``(F, N, 2)`` each,
+    None for one frame) and the outside-grid mask ``(F, N)``."""
     if len(times) == 1:
-        return tracers[None], None, np.zeros((1, len(tracers)), dtype=bool)
+        return tracers[None], None, None, np.zeros((1, len(tracers)), dtype=bool)
     if not source.has_velocity:
         raise RimclError(
             f"{getattr(source, 'path', 'the field')} holds no velocity, which tracking the "
             "tracers over several frames needs (use --frames 1 for positions only)"
         )
-    planes = [source.sheet_velocity(source.times[f], scene.x_sheet) for f in frame_ids]
-    velocity = SheetVelocity(
-        planes, times, source.origin[1:], source.spacing[1:], source.boundary == "periodic"
-    )
-    tracks = integrate_tracks(velocity, tracers, times, TRACKING_SUBSTEPS)
+    velocity = SheetVelocity.from_source(source, scene.x_sheet, times[0], times[-1])
+    stored_spacing = float(np.min(np.diff(velocity.times))) if len(velocity.times) > 1 else 0
+    substeps = TRACKING_SUBSTEPS
+    if stored_spacing > 0:
+        # RK4 steps no longer than the reference's 1/8 of the stored spacing
+        substeps = max(
+            substeps, math.ceil(TRACKING_SUBSTEPS * (times[1] - times[0]) / stored_spacing)
+        )
+    tracks = integrate_tracks(velocity, tracers, times, substeps)
     outside = np.stack([~velocity.inside(p) for p in tracks])
-    return tracks, velocity(tracers, times[0]), outside
+    true_velocity = track_velocity(velocity, tracks, times)
+    true_acceleration = track_acceleration(velocity, tracks, times)
+    return tracks, true_velocity, true_acceleration, outside
 
 
 def run_render(
-    field=None,
-    *,
-    case=None,
-    k_rho=None,
-    tracers=1000,
-    camera="plane",
-    fan=32,
-    pupil_rays=1024,
-    aperture_diameter=None,
-    focal_length=None,
-    f_number=None,
-    camera_distance=None,
-    view_angle=0.0,
-    renderer="exact",
-    pixels=8192,
-    psf_sigma=2.3,
-    threshold=100.0,
-    centroid_weights="excess",
-    max_window=512,
-    bit_depth=10,
-    interp="trilinear",
-    precision="f32c",
-    step=None,
-    seed=0,
-    frames=3,
-    start_frame=0,
-    margin=0.05,
-    x_sheet=None,
-    depth=None,
-    frame_image=False,
-    ray_sample=DEFAULT_RAY_SAMPLE,
-    rays_per_batch=DEFAULT_RAYS_PER_BATCH,
-    reference=None,
-    device=None,
-    progress=False,
+    field=None, *, case=None, k_rho=None, config=None, reference=None, shard=None, progress=False
 ):
     """Run the synthetic PTV measurement of one refractive-index case.
+
+    The stages: resolve the configuration against the field (:class:`Setup`); the true
+    tracks and the reference images through a uniform medium (:func:`make_reference`,
+    skipped when ``reference`` is given); the measured images through each frame's field;
+    velocities, accelerations and the output tables.
 
     Parameters
     ----------
@@ -443,62 +608,14 @@ def run_render(
         ``"C0"`` … ``"C4"``; or give ``k_rho``. Not for files storing ``delta_n``.
     k_rho : float, optional
         Gladstone–Dale product ``G`` (``n = 1 + G ρ``); 0 is a uniform medium.
-    tracers : int
-        Number of tracers, seeded uniformly over the field of view.
-    camera : {"plane", "pupil"}
-        ``plane``: rays aimed at a ``fan x fan`` grid on the exit plane (the paper);
-        ``pupil``: ``pupil_rays`` rays aimed over a circular aperture.
-    fan : int
-        Aim points per side of the plane camera (paper: 100).
-    pupil_rays : int
-        Rays per tracer of the pupil camera.
-    aperture_diameter : float, optional
-        Pupil diameter (length units); or ``focal_length`` / ``f_number``. Default: a
-        quarter of the camera distance.
-    focal_length, f_number : float, optional
-    camera_distance : float, optional
-        From the sheet to the pupil centre along the viewing axis (length units; default
-        4 L1).
-    view_angle : float
-        Angle of the viewing axis to ``x1``, towards ``+x2`` (degrees).
-    renderer : {"exact", "paper"}
-        Pixel-integrated Gaussian per ray, or the paper's binning and Gaussian filter.
-    pixels : int
-        Pixels across the wider side of the field of view (paper: 8192).
-    psf_sigma : float
-        Gaussian point-spread σ (pixels). 2.3 px gives a ~10 px tracer image at a
-        threshold of 100 counts, as in the paper.
-    threshold : float
-        Grey threshold in counts of the camera (paper, 10 bits: 100 for air, 500 for water).
-    centroid_weights : {"excess", "grey"}
-        See :mod:`rimcl.centroid`.
-    max_window : int
-        Largest per-tracer window side (pixels).
-    bit_depth : int
-        Bits per pixel of the camera, 8 to 16 (paper: 10). The rounding to counts moves
-        centroids by a few 1e-4 pixel at 10 bits, a floor under small refraction errors.
-    interp, precision, step :
-        Passed to :func:`rimcl.trace_rays`.
-    seed : int
-        Seeds tracers and the ray subsample; the same seed gives the same tracers and rays
-        in every case (common random numbers).
-    frames : {1, 2, 3}
-        Frames imaged: 1 (positions), 2 (+ velocity), 3 (+ acceleration).
-    start_frame : int
-        First stored frame used; frames are consecutive.
-    margin : float
-        Edge band of the field of view left free of tracers (fraction of its width).
-    x_sheet, depth : float, optional
-        Sheet position and traced depth ``L1`` (defaults: see :meth:`Scene.from_grid`).
-    frame_image : bool
-        Also keep a full image of all tracers of the first frame (measured).
-    ray_sample : int
-        Measured rays of the first frame kept for diagnostics.
-    rays_per_batch : int
-        Rays traced per batch; bounds the memory.
+    config : rimcl.config.MeasureConfig, optional
+        Camera, renderer, integrator, tracers, time and run settings (defaults: the
+        dataclasses' defaults).
     reference : Reference, optional
         From an earlier result with the same configuration: skips the reference pass.
-    device : str or pyopencl.Device, optional
+    shard : (int, int), optional
+        Measure only tracers ``first..stop-1`` of the run (the same tracers, rays and
+        numbers as in the whole run); :func:`merge_results` joins shards.
     progress : bool
         Show a progress bar.
 
@@ -506,209 +623,86 @@ def run_render(
     -------
     RenderResult
     """
-    from rimcl.device import describe_device, select_device
-
-    if centroid_weights not in CENTROID_WEIGHTS:
-        raise RimclError(
-            f"unknown centroid weights {centroid_weights!r}; choose from {CENTROID_WEIGHTS}"
-        )
-    if int(frames) not in (1, 2, 3):
-        raise RimclError(f"frames must be 1, 2 or 3, got {frames}")
-    if int(pixels) < 1:
-        raise RimclError(f"the image needs at least 1 pixel, got {pixels}")
-    if step is not None and not (isinstance(step, numbers.Real) and step > 0):
-        raise RimclError(f"the step must be a positive number (or None: half a cell), got {step!r}")
-    frames = int(frames)
+    config = MeasureConfig() if config is None else config
     with ExitStack() as stack:
         source, source_name = _open_source(field, stack)
-        case_name, g = _case_of(source, case, k_rho)
-        frame_ids = list(range(int(start_frame), int(start_frame) + frames))
-        if start_frame < 0 or frame_ids[-1] >= source.n_frames:
-            raise RimclError(
-                f"{frames} frames from frame {start_frame} need frames up to {frame_ids[-1]}, "
-                f"but the field has {source.n_frames} (0..{source.n_frames - 1})"
-            )
-        times = np.asarray(source.times, dtype=np.float64)[frame_ids]
-        dt = float(times[1] - times[0]) if frames > 1 else float("nan")
-        if frames == 3 and not math.isclose(times[2] - times[1], dt, rel_tol=1e-6):
-            raise RimclError(
-                f"frames {frame_ids} are not equally spaced in time ({times.tolist()}); "
-                "the second difference needs equal spacing"
-            )
-        scene = Scene.from_grid(
-            source.origin, source.spacing, source.shape, source.boundary, x_sheet, depth
-        )
-        cam = _make_camera(
-            scene,
-            camera,
-            fan,
-            pupil_rays,
-            aperture_diameter,
-            focal_length,
-            f_number,
-            camera_distance,
-            view_angle,
-        )
-        pixel_size = float(np.max(scene.fov_size)) / int(pixels)
-        rend = Renderer(
-            renderer,
-            pixel_size,
-            tuple(scene.fov_lo),
-            float(psf_sigma),
-            int(max_window),
-            int(bit_depth),
-        )
-        if not (np.isfinite(threshold) and 0 <= threshold < rend.full_scale):
-            raise RimclError(
-                f"the threshold must be in [0, {rend.full_scale}) counts of the "
-                f"{rend.bit_depth}-bit camera, got {threshold}"
-            )
-        device = select_device(device)
-        tracer_stream, sample_stream = np.random.SeedSequence(int(seed)).spawn(2)
-        start_positions = seed_tracers(tracers, scene, np.random.default_rng(tracer_stream), margin)
-        count = len(start_positions)
-        batch = max(1, int(rays_per_batch) // cam.rays_per_tracer)
-        calibration = None
-        if interp == "auto":
-            calibration = _calibrate_interp(
-                source,
-                frame_ids[0],
-                g,
-                scene,
-                cam,
-                start_positions,
-                rend,
-                precision,
-                step,
-                device,
-            )
-            interp = calibration["interp"]
-        key = {
-            "field": source_name,
-            "grid": {
-                "origin": np.asarray(source.origin).tolist(),
-                "spacing": np.asarray(source.spacing).tolist(),
-                "shape_n3_n2_n1": list(source.shape),
-                "boundary": source.boundary,
-            },
-            "frames": frame_ids,
-            "times": times.tolist(),
-            "scene": scene.describe(),
-            "tracers": count,
-            "seed": int(seed),
-            "margin": float(margin),
-            "camera": cam.describe(),
-            "render": {
-                **rend.describe(),
-                "threshold": float(threshold),
-                "centroid_weights": centroid_weights,
-            },
-            "trace": {
-                "interp": interp,
-                "precision": precision,
-                "step": None if step is None else float(step),
-                "device": describe_device(device),
-            },
-        }
-        ref_step = _reference_step(step, source)
-        timings = {"track": 0.0, "trace": 0.0, "render": 0.0, "centroid": 0.0}
-        passes = frames if reference is not None else 2 * frames
-        bar = _progress(progress, passes * count)
+        if config.box is not None:
+            source = CroppedSource(source, config.box)
+        case_index = _case_of(source, case, k_rho, config.fluid)
+        streams = np.random.SeedSequence(int(config.tracers.seed)).spawn(2)
+        setup, calibration = _setup(source, source_name, case_index, config, streams, shard)
+        count = len(setup.start_positions)
+        frames = len(setup.frame_ids)
+        bar = _progress(progress, (frames if reference is not None else 2 * frames) * count)
         try:
             if reference is None:
-                reference = _make_reference(
-                    source,
-                    scene,
-                    cam,
-                    rend,
-                    key,
-                    start_positions,
-                    times,
-                    frame_ids,
-                    threshold,
-                    centroid_weights,
-                    timings,
-                    batch,
-                    device,
-                    ref_step,
-                    interp,
-                    precision,
-                    bar,
-                )
-            elif reference.key != key:
-                changed = sorted(k for k in key if reference.key.get(k) != key[k])
+                reference = make_reference(setup, bar)
+            elif reference.key != setup.key:
+                changed = sorted(k for k in setup.key if reference.key.get(k) != setup.key[k])
                 raise RimclError(
                     "the reference was made for another configuration (differs in: "
                     f"{', '.join(changed)})"
                 )
-            measured = _Pass(frames, count, rend, threshold, centroid_weights, timings)
             sampler = _RaySampler(
-                count * cam.rays_per_tracer, ray_sample, np.random.default_rng(sample_stream)
+                config.tracers.count * setup.camera.rays_per_tracer,
+                config.run.ray_sample,
+                np.random.default_rng(streams[1]),
             )
             canvas = None
-            if frame_image:
-                extent = np.ceil(scene.fov_size / pixel_size).astype(int)
-                canvas = FrameImage(extent[0], extent[1], rend.full_scale)
-            options = {"step": step, "interp": interp, "precision": precision, "device": device}
-            delta_n_max = 0.0
-            for f, frame in enumerate(frame_ids):
-                field_f = _load_frame(source, frame, g)
-                delta_n_max = max(delta_n_max, field_f.delta_n_range)
-                _image_frame(
-                    measured,
-                    f,
-                    field_f,
-                    reference.tracks[f],
-                    scene,
-                    cam,
-                    options,
-                    batch,
-                    scales=reference.images["scale"],
-                    canvas=canvas if f == 0 else None,
-                    sampler=sampler if f == 0 else None,
-                    bar=bar,
-                )
-                del field_f
+            if config.run.frame_image:
+                pixel_size = setup.imaging.renderer.pixel_size
+                extent = np.ceil(setup.scene.fov_size / pixel_size).astype(int)
+                canvas = FrameImage(extent[0], extent[1], setup.imaging.renderer.full_scale)
+            measured, delta_n_max = _measure(setup, case_index, reference, sampler, canvas, bar)
         finally:
             if bar is not None:
                 bar.close()
-        config = {
-            **key,
-            "case": case_name,
-            "k_rho": g,
-            "start_frame": int(start_frame),
-            "rays_per_batch": int(rays_per_batch),
-            "ray_sample": int(ray_sample),
+        run_config = {
+            **setup.key,
+            "case": case_index.name,
+            "k_rho": case_index.g,
+            "start_frame": int(config.time.start_frame),
+            "rays_per_batch": int(config.run.rays_per_batch),
+            "ray_sample": int(config.run.ray_sample),
+            "engine": config.run.engine,
             "tracking_substeps": TRACKING_SUBSTEPS,
-            "reference_step": ref_step,
+            "reference_step": _reference_step(config.integrator.step, source),
         }
         if calibration is not None:
-            config["auto"] = calibration
-    return _assemble(
-        config,
-        key,
-        reference,
-        measured,
-        sampler,
-        cam,
-        rend,
-        scene,
-        times,
-        dt,
-        case_name,
-        g,
-        delta_n_max,
-        timings,
-        canvas,
-        device,
-    )
+            run_config["auto"] = calibration
+    result = _assemble(setup, run_config, reference, measured, sampler, delta_n_max)
+    result.frame_image = None if canvas is None else canvas.counts
+    return result
+
+
+def _measure(setup, case_index, reference, sampler, canvas, bar):
+    """The measured pass: every frame through its field, with the reference's scales."""
+    measured = _Pass(MEASURED_PASS, len(setup.frame_ids), len(setup.start_positions))
+    delta_n_max = 0.0
+    for f, frame in enumerate(setup.frame_ids):
+        field = case_index.field(setup.source, frame, setup.times[f])
+        delta_n_max = max(delta_n_max, field.delta_n_range)
+        extras = {"bar": bar}
+        if f == 0:
+            extras.update(sampler=sampler, canvas=canvas)
+        _image_frame(
+            setup,
+            measured,
+            f,
+            field,
+            reference.tracks[f],
+            scales=reference.images["scale"][f],
+            extras=extras,
+        )
+        del field
+    return measured, delta_n_max
 
 
 #: Tracers whose rays calibrate ``interp="auto"`` (evenly spread over the tracer set).
 CALIBRATION_TRACERS = 16
 
 
-def _calibrate_interp(source, frame, g, scene, cam, positions, rend, precision, step, device):
+def _calibrate_interp(setup, case_index, positions):
     """Choose the interpolation for ``interp="auto"`` once, on the first measured frame.
 
     The tolerance is 0.01 pixel of this camera. Every batch, frame and the reference then
@@ -716,19 +710,20 @@ def _calibrate_interp(source, frame, g, scene, cam, positions, rend, precision, 
     """
     from rimcl.calibrate import calibrate
 
+    camera = setup.camera
     chosen = np.unique(np.linspace(0, len(positions) - 1, CALIBRATION_TRACERS).astype(int))
-    origins = np.repeat(scene.in_sheet(positions[chosen]), cam.rays_per_tracer, axis=0)
-    directions = cam.directions(positions[chosen]).reshape(-1, 3)
+    origins = np.repeat(setup.scene.in_sheet(positions[chosen]), camera.rays_per_tracer, axis=0)
+    directions = camera.directions(positions[chosen]).reshape(-1, 3)
     record = calibrate(
-        _load_frame(source, frame, g),
+        case_index.field(setup.source, setup.frame_ids[0], setup.times[0]),
         origins,
         directions,
-        x_end=scene.x_end,
+        x_end=setup.scene.x_end,
         interp="auto",
-        step=step,
-        precision=precision,
-        device=device,
-        tolerance=0.01 * rend.pixel_size,
+        step=setup.trace_options["step"],
+        precision=setup.trace_options["precision"],
+        device=setup.trace_options["device"],
+        tolerance=0.01 * setup.imaging.renderer.pixel_size,
     )
     logger.info(
         "auto: interp %s, estimated r' error %.2e (0.01 pixel = %.2e)",
@@ -753,42 +748,44 @@ def _reference_step(step, source):
     return default_step(probe)
 
 
-def _make_reference(
-    source,
-    scene,
-    cam,
-    rend,
-    key,
-    start_positions,
-    times,
-    frame_ids,
-    threshold,
-    centroid_weights,
-    timings,
-    batch,
-    device,
-    ref_step,
-    interp,
-    precision,
-    bar,
-):
+def make_reference(setup, bar=None):
+    """True tracks and the reference images (through a uniform medium) of every frame.
+
+    Parameters
+    ----------
+    setup : Setup
+    bar : tqdm progress bar, optional
+
+    Returns
+    -------
+    Reference
+    """
     start = time.perf_counter()
-    tracks, true_velocity, outside = _true_motion(source, scene, start_positions, times, frame_ids)
-    timings["track"] += time.perf_counter() - start
-    uniform = _uniform_like(source)
-    options = {"step": ref_step, "interp": interp, "precision": precision, "device": device}
-    ref = _Pass(len(frame_ids), len(start_positions), rend, threshold, centroid_weights, timings)
-    for f in range(len(frame_ids)):
-        _image_frame(ref, f, uniform, tracks[f], scene, cam, options, batch, bar=bar)
+    tracks, true_velocity, true_acceleration, outside = _true_motion(
+        setup.source, setup.scene, setup.start_positions, setup.times
+    )
+    setup.timings["track"] += time.perf_counter() - start
+    uniform = _uniform_like(setup.source)
+    reference_setup = dataclasses.replace(
+        setup,
+        trace_options={
+            **setup.trace_options,
+            "step": _reference_step(setup.trace_options["step"], setup.source),
+        },
+    )
+    ref = _Pass(REFERENCE_PASS, len(setup.frame_ids), len(setup.start_positions))
+    for f in range(len(setup.frame_ids)):
+        _image_frame(reference_setup, ref, f, uniform, tracks[f], extras={"bar": bar})
     if ref.status_counts[0] == ref.vignetted:
         raise RimclError(
             "no ray of any tracer reaches the camera even through a uniform medium: "
             "check the camera geometry (distance, view angle, aperture) against the field"
         )
     return Reference(
-        key=key,
+        key=setup.key,
         tracks=tracks,
         true_velocity=true_velocity,
+        true_acceleration=true_acceleration,
         outside=outside,
         images=ref.images,
         ray_counts=ref.counts(),
@@ -796,24 +793,79 @@ def _make_reference(
     )
 
 
-def _assemble(
-    config,
-    key,
-    reference,
-    measured,
-    sampler,
-    cam,
-    rend,
-    scene,
-    times,
-    dt,
-    case_name,
-    g,
-    delta_n_max,
-    timings,
-    canvas,
-    device,
-):
+def _frame_rows(ids, frames_used, columns, flags, notes, window):
+    """One table of per-tracer estimates at evaluation frames, frame-major.
+
+    ``columns`` maps a name to an ``(M, N)`` array over the ``M`` evaluation frames
+    ``frames_used``; each row's flags and notes are the union over the ``window`` frames
+    its estimate uses, starting at ``frames_used - offset`` (see :func:`_kinematics`).
+    """
+    frames_used = np.asarray(frames_used)
+    first_frames, span = window
+    union = np.stack([np.bitwise_or.reduce(flags[f : f + span], axis=0) for f in first_frames])
+    union_notes = np.stack(
+        [np.bitwise_or.reduce(notes[f : f + span], axis=0) for f in first_frames]
+    )
+    count = len(ids)
+    table = {
+        "id": np.tile(ids, len(frames_used)),
+        "frame": np.repeat(frames_used, count),
+    }
+    table.update({name: values.reshape(-1) for name, values in columns.items()})
+    table["flags"] = union.reshape(-1)
+    table["notes"] = union_notes.reshape(-1)
+    return table
+
+
+def _kinematics(ids, positions, truth, flags, notes, dt, time_config):
+    """Velocity and acceleration tables of every position kind (DESIGN §6.6, §13).
+
+    ``velocity``: the paper's forward difference ``(x_{k+1} - x_k)/Δt`` at frames
+    ``0 … F-2``, truth ``u(x_k, t_k)``; ``acceleration``: the second difference at frames
+    ``1 … F-2``, truth the same difference of the true positions (the paper's);
+    ``velocity_fit``, ``acceleration_fit``: a sliding polynomial fit over ``fit_window``
+    frames at each window centre, truth ``u`` and ``Du/Dt`` there. Tables a run has too
+    few frames for are None.
+    """
+    frames = len(flags)
+    measured = {k: v for k, v in positions.items() if k != "true"}
+    tables = dict.fromkeys(("velocity", "acceleration", "velocity_fit", "acceleration_fit"))
+    if frames >= 2:
+        columns = {}
+        for kind, track in measured.items():
+            u = (track[1:] - track[:-1]) / dt
+            columns[f"u2_{kind}"], columns[f"u3_{kind}"] = u[..., 0], u[..., 1]
+        u = truth["velocity"][:-1]
+        columns["u2_true"], columns["u3_true"] = u[..., 0], u[..., 1]
+        used = np.arange(frames - 1)
+        tables["velocity"] = _frame_rows(ids, used, columns, flags, notes, (used, 2))
+    if frames >= 3:
+        columns = {}
+        for kind, track in positions.items():
+            a = second_differences(track, dt)
+            columns[f"a2_{kind}"], columns[f"a3_{kind}"] = a[..., 0], a[..., 1]
+        used = np.arange(1, frames - 1)
+        tables["acceleration"] = _frame_rows(ids, used, columns, flags, notes, (used - 1, 3))
+    window, order = int(time_config.fit_window), int(time_config.fit_order)
+    if frames >= window:
+        u_columns, a_columns = {}, {}
+        centres = None
+        for kind, track in measured.items():
+            fit = sliding_fit(track, dt, window, order)
+            centres = fit.centres
+            u_columns[f"u2_{kind}"], u_columns[f"u3_{kind}"] = fit.velocity.transpose(2, 0, 1)
+            a_columns[f"a2_{kind}"], a_columns[f"a3_{kind}"] = fit.acceleration.transpose(2, 0, 1)
+        u, a = truth["velocity"][centres], truth["acceleration"][centres]
+        u_columns["u2_true"], u_columns["u3_true"] = u[..., 0], u[..., 1]
+        a_columns["a2_true"], a_columns["a3_true"] = a[..., 0], a[..., 1]
+        span = (centres - window // 2, window)
+        tables["velocity_fit"] = _frame_rows(ids, centres, u_columns, flags, notes, span)
+        tables["acceleration_fit"] = _frame_rows(ids, centres, a_columns, flags, notes, span)
+    return tables
+
+
+def _assemble(setup, config, reference, measured, sampler, delta_n_max):
+    """The output tables of one run (stage 4): positions, velocities, accelerations."""
     frames, count = reference.tracks.shape[:2]
     ref, meas = reference.images, measured.images
     truth_flags = np.where(reference.outside, int(TracerFlag.OUTSIDE_FIELD), 0)
@@ -823,73 +875,73 @@ def _assemble(
     def rows(values):
         return np.asarray(values).reshape(-1)
 
-    ids = np.tile(np.arange(count), frames)
+    camera, renderer, scene = setup.camera, setup.imaging.renderer, setup.scene
+    ids = np.arange(setup.first_tracer, setup.first_tracer + count)
     tracers = {
-        "id": ids,
+        "id": np.tile(ids, frames),
         "frame": np.repeat(np.arange(frames), count),
-        "time": np.repeat(times, count),
+        "time": np.repeat(setup.times, count),
         "x2_true": rows(reference.tracks[..., 0]),
         "x3_true": rows(reference.tracks[..., 1]),
-        "x2_ref": rows(ref["x2"]),
-        "x3_ref": rows(ref["x3"]),
-        "x2_meas": rows(meas["x2"]),
-        "x3_meas": rows(meas["x3"]),
-        "area_ref": rows(ref["area"]),
-        "area_meas": rows(meas["area"]),
-        "perimeter_ref": rows(ref["perimeter"]),
-        "perimeter_meas": rows(meas["perimeter"]),
-        "circularity_ref": rows(ref["circularity"]),
-        "circularity_meas": rows(meas["circularity"]),
-        "n_rays": np.full(frames * count, cam.rays_per_tracer, dtype=np.int64),
-        "n_rays_ok": rows(meas["n_rays_ok"]),
-        "n_rays_ok_ref": rows(ref["n_rays_ok"]),
-        "peak_ref": rows(ref["peak"]),
-        "peak_meas": rows(meas["peak"]),
-        "flags": rows(flags),
-        "notes": rows(notes),
-        "flags_ref": rows(ref["flags"]),
-        "flags_meas": rows(meas["flags"]),
     }
+    for suffix, images in (("ref", ref), ("meas", meas)):
+        tracers[f"x2_{suffix}"] = rows(images["x2"])
+        tracers[f"x3_{suffix}"] = rows(images["x3"])
+    tracers.update(
+        {
+            "x2_opt": rows(meas["x2_opt"]),
+            "x3_opt": rows(meas["x3_opt"]),
+            "x2_opt_ref": rows(ref["x2_opt"]),
+            "x3_opt_ref": rows(ref["x3_opt"]),
+        }
+    )
+    for name in ("area", "perimeter", "circularity"):
+        tracers[f"{name}_ref"] = rows(ref[name])
+        tracers[f"{name}_meas"] = rows(meas[name])
+    tracers.update(
+        {
+            "n_rays": np.full(frames * count, camera.rays_per_tracer, dtype=np.int64),
+            "n_rays_ok": rows(meas["n_rays_ok"]),
+            "n_rays_ok_ref": rows(ref["n_rays_ok"]),
+            "peak_ref": rows(ref["peak"]),
+            "peak_meas": rows(meas["peak"]),
+            "flags": rows(flags),
+            "notes": rows(notes),
+            "flags_ref": rows(ref["flags"]),
+            "flags_meas": rows(meas["flags"]),
+        }
+    )
     positions = {
         "true": reference.tracks,
         "ref": np.stack([ref["x2"], ref["x3"]], axis=-1),
         "meas": np.stack([meas["x2"], meas["x3"]], axis=-1),
+        "opt": np.stack([meas["x2_opt"], meas["x3_opt"]], axis=-1),
+        "opt_ref": np.stack([ref["x2_opt"], ref["x3_opt"]], axis=-1),
     }
-    velocity = acceleration = None
-    if frames >= 2:
-        velocity = {"id": np.arange(count)}
-        truth = {"true": reference.true_velocity}
-        for kind in ("true", "ref", "meas"):
-            u = truth.get(kind)
-            u = first_difference(positions[kind], dt) if u is None else u
-            velocity[f"u2_{kind}"], velocity[f"u3_{kind}"] = u[:, 0], u[:, 1]
-        velocity["flags"] = np.bitwise_or.reduce(flags[:2], axis=0)
-        velocity["notes"] = np.bitwise_or.reduce(notes[:2], axis=0)
-    if frames >= 3:
-        acceleration = {"id": np.arange(count)}
-        for kind in ("true", "ref", "meas"):
-            a = second_difference(positions[kind], dt)
-            acceleration[f"a2_{kind}"], acceleration[f"a3_{kind}"] = a[:, 0], a[:, 1]
-        acceleration["flags"] = np.bitwise_or.reduce(flags[:3], axis=0)
-        acceleration["notes"] = np.bitwise_or.reduce(notes[:3], axis=0)
+    truth = {"velocity": reference.true_velocity, "acceleration": reference.true_acceleration}
+    kinematics = _kinematics(ids, positions, truth, flags, notes, setup.dt, setup.time)
+    if reference.true_velocity is not None:
+        for name, values in (("u", reference.true_velocity), ("a", reference.true_acceleration)):
+            tracers[f"{name}2_true"] = rows(values[..., 0])
+            tracers[f"{name}3_true"] = rows(values[..., 1])
     attrs = {
         "rimcl_schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
-        "case": case_name,
-        "k_rho": g,
+        "case": config["case"],
+        "k_rho": config["k_rho"],
         "delta_n_max": delta_n_max,
         "length_L": scene.depth,
-        "pixel_size": rend.pixel_size,
-        "dt": dt,
+        "pixel_size": renderer.pixel_size,
+        "dt": setup.dt,
         "flag_names": json.dumps(flag_names()),
         "note_bits": int(NOTES),
         "n_tracers": count,
         "n_frames": frames,
-        "rays_per_tracer": cam.rays_per_tracer,
-        "renderer": rend.kind,
+        "rays_per_tracer": camera.rays_per_tracer,
+        "renderer": renderer.kind,
         "camera": config["camera"]["camera"],
         "threshold": config["render"]["threshold"],
-        "psf_sigma_px": rend.psf_sigma,
+        "psf_sigma_px": renderer.psf_sigma,
         "x_sheet": scene.x_sheet,
         "x_end": scene.x_end,
         "fov_lo": scene.fov_lo,
@@ -905,14 +957,93 @@ def _assemble(
         attrs=attrs,
         config=config,
         tracers=tracers,
-        velocity=velocity,
-        acceleration=acceleration,
-        rays=sampler.table(cam.rays_per_tracer),
+        kinematics=kinematics,
+        rays=sampler.table(camera.rays_per_tracer),
         ray_attrs=ray_attrs,
         reference=reference,
-        timings=dict(timings),
-        frame_image=None if canvas is None else canvas.counts,
-        device=device,
+        timings=dict(setup.timings),
+        frame_image=None,
+        device=setup.trace_options["device"],
+    )
+
+
+def _join_frames(parts, frames):
+    """Frame-major rows of shards ``(F * N_i,)`` joined into ``(F * sum N_i,)``."""
+    return np.concatenate([p.reshape(frames, -1) for p in parts], axis=1).reshape(-1)
+
+
+def merge_results(parts):
+    """Join the results of consecutive shards of one run into the whole run's result.
+
+    Parameters
+    ----------
+    parts : sequence of RenderResult
+        From :func:`run_render` with ``shard`` ranges that tile ``0..N`` in order.
+
+    Returns
+    -------
+    RenderResult
+        Equal, table by table, to the result of the unsharded run.
+    """
+    parts = list(parts)
+    first = parts[0]
+    frames = int(first.attrs["n_frames"])
+    ranges = [tuple(p.config["shard"]) for p in parts]
+    total = int(first.config["tracers"])
+    if (
+        ranges[0][0] != 0
+        or ranges[-1][1] != total
+        or any(a[1] != b[0] for a, b in itertools.pairwise(ranges))
+    ):
+        raise RimclError(f"shards {ranges} do not tile the {total} tracers in order")
+
+    def rows(tables):
+        if tables[0] is None:
+            return None
+        evaluated = len(np.unique(tables[0]["frame"]))
+        return {k: _join_frames([t[k] for t in tables], evaluated) for k in tables[0]}
+
+    tracers = {k: _join_frames([p.tracers[k] for p in parts], frames) for k in first.tracers}
+    ray_attrs = dict(first.ray_attrs)
+    for name in ray_attrs:
+        if name != "sampled_from_frame":
+            ray_attrs[name] = sum(p.ray_attrs[name] for p in parts)
+    refs = [p.reference for p in parts]
+    key = {**refs[0].key, "shard": [0, total]}
+    reference = Reference(
+        key=key,
+        tracks=np.concatenate([r.tracks for r in refs], axis=1),
+        true_velocity=None
+        if refs[0].true_velocity is None
+        else np.concatenate([r.true_velocity for r in refs], axis=1),
+        true_acceleration=None
+        if refs[0].true_acceleration is None
+        else np.concatenate([r.true_acceleration for r in refs], axis=1),
+        outside=np.concatenate([r.outside for r in refs], axis=1),
+        images={k: np.concatenate([r.images[k] for r in refs], axis=1) for k in refs[0].images},
+        ray_counts={k: sum(r.ray_counts[k] for r in refs) for k in refs[0].ray_counts},
+        ray_steps=sum(r.ray_steps for r in refs),
+    )
+    frame_image = None
+    if first.frame_image is not None:
+        stacked = np.sum([p.frame_image.astype(np.int64) for p in parts], axis=0)
+        full_scale = int(first.config["render"]["full_scale"])
+        frame_image = np.minimum(stacked, full_scale).astype(np.uint16)
+    return RenderResult(
+        attrs={
+            **first.attrs,
+            "n_tracers": total,
+            "delta_n_max": max(p.attrs["delta_n_max"] for p in parts),
+        },
+        config={**first.config, "shard": [0, total]},
+        tracers=tracers,
+        kinematics={k: rows([p.kinematics[k] for p in parts]) for k in first.kinematics},
+        rays={k: np.concatenate([p.rays[k] for p in parts]) for k in first.rays},
+        ray_attrs=ray_attrs,
+        reference=reference,
+        timings={k: sum(p.timings[k] for p in parts) for k in first.timings},
+        frame_image=frame_image,
+        device=first.device,
     )
 
 
@@ -938,12 +1069,7 @@ def write_render(path, result, overwrite=False):
             h5.attrs[name] = value
         stamp_h5(h5, result.config, result.device)
         h5.attrs["timings_s"] = to_json(result.timings)
-        groups = {
-            "tracers": result.tracers,
-            "velocity": result.velocity,
-            "acceleration": result.acceleration,
-            "rays": result.rays,
-        }
+        groups = {"tracers": result.tracers, **result.kinematics, "rays": result.rays}
         for group_name, table in groups.items():
             if table is None:
                 continue

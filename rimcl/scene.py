@@ -38,8 +38,10 @@ class SceneKey:
     default : object
         Value when the key is absent; ``None`` for keys whose default is decided by the
         pipeline (the printed scene shows them commented out, with ``example``).
-    kind : {"str", "int", "float", "bool", "names", "thresholds"}
-        ``names``: a list of strings; ``thresholds``: a table of case name to number.
+    kind : {"str", "int", "float", "bool", "names", "thresholds", "box", "ints", "vector"}
+        ``names``: a list of strings; ``thresholds``: a table of case name to number;
+        ``box``: three ``[lo, hi]`` pairs; ``ints``: a list of whole numbers >= 1;
+        ``vector``: three numbers.
     doc : str
         What the key means, with units.
     choices : tuple of str
@@ -70,6 +72,8 @@ class SceneKey:
 def _choices():
     from rimcl.camera import CAMERAS
     from rimcl.centroid import CENTROID_WEIGHTS
+    from rimcl.config import ENGINES
+    from rimcl.imaging import SCALINGS
     from rimcl.render import RENDERERS
     from rimcl.trace import INTERPOLATIONS, PRECISIONS
 
@@ -79,6 +83,8 @@ def _choices():
         "renderer": RENDERERS,
         "interp": INTERPOLATIONS,
         "precision": PRECISIONS,
+        "scale": SCALINGS,
+        "engine": ENGINES,
     }
 
 
@@ -97,7 +103,7 @@ def _keys():
             "start_frame",
             0,
             "int",
-            "first of the three consecutive frames used (time t0)",
+            "stored frame of the first imaged frame (time t0)",
             minimum=0,
         ),
         SceneKey(
@@ -116,6 +122,51 @@ def _keys():
             "traced depth L (field length units); default: the whole grid along x1",
             positive=True,
             example=3.0,
+        ),
+        SceneKey(
+            "field",
+            "box",
+            None,
+            "box",
+            "measure in this box cut out of the field, [[x1lo, x1hi], [x2lo, x2hi], "
+            "[x3lo, x3hi]] (field length units), clamped outside (the paper: a 512³ eighth)",
+            example=[[0.0, 3.141592653589793]] * 3,
+        ),
+        SceneKey(
+            "time",
+            "frames",
+            5,
+            "int",
+            "frames imaged, time.dt apart (3: the paper; more for fitted tracks)",
+            positive=True,
+        ),
+        SceneKey(
+            "time",
+            "dt",
+            None,
+            "float",
+            "time between imaged frames; default: the field's frame spacing (0.02 on the "
+            "sample; the paper: 0.005); times between stored frames are interpolated",
+            positive=True,
+            example=0.04,
+        ),
+        SceneKey(
+            "time",
+            "fit_window",
+            5,
+            "int",
+            "frames of the sliding polynomial fit of each track (odd; the fitted velocity "
+            "and acceleration need at least as many frames)",
+            minimum=3,
+        ),
+        SceneKey("time", "fit_order", 2, "int", "order of the fitted polynomial", minimum=2),
+        SceneKey(
+            "time",
+            "dt_multiples",
+            [1, 2],
+            "ints",
+            "the Δt sweep: the paper's differences also over every m-th imaged frame, for "
+            "each m listed (Δt = m time.dt)",
         ),
         SceneKey(
             "cases",
@@ -231,12 +282,13 @@ def _keys():
         SceneKey(
             "renderer",
             "psf_sigma",
-            7.0,
+            None,
             "float",
-            "Gaussian point-spread sigma (pixels; 2.3 px gives the paper's ~10 px tracer "
-            "image); wide enough here that water-like cases (C4), whose rays spread over "
-            "~1e-2 L, still image as one blob above threshold",
+            "Gaussian point-spread sigma (pixels); default 7 px (2.3 px gives the paper's "
+            "~10 px tracer image; 7 px keeps water-like cases, whose rays spread over "
+            "~1e-2 L, one blob above threshold), or a lens camera's own tracer image",
             positive=True,
+            example=7.0,
         ),
         SceneKey(
             "renderer",
@@ -264,6 +316,16 @@ def _keys():
             "centroids by a few 1e-4 pixel at 10 bits, a floor under the weakest cases' "
             "velocity errors (scale the threshold with the full scale 2**bits - 1)",
             positive=True,
+        ),
+        SceneKey(
+            "renderer",
+            "scale",
+            "reference",
+            "str",
+            "reference: each measured image uses the scale of its tracer's reference image "
+            "(comparable images); per_image: every image scaled to its own peak, as the "
+            'paper "rescaled to a 10-bit dynamic range"',
+            choices=choice["scale"],
         ),
         SceneKey(
             "renderer",
@@ -299,11 +361,211 @@ def _keys():
             example=0.05,
         ),
         SceneKey(
+            "field",
+            "length_m",
+            None,
+            "float",
+            "metres per field length unit (the field's physical size; the lens camera needs it)",
+            positive=True,
+            example=0.0106,
+        ),
+        SceneKey(
+            "camera",
+            "focal_length_mm",
+            50.0,
+            "float",
+            "lens camera: focal length (mm); camera.f_number is its f-number (default 8)",
+            positive=True,
+        ),
+        SceneKey(
+            "camera",
+            "magnification",
+            None,
+            "float",
+            "lens camera: magnification M (or working_distance_mm)",
+            positive=True,
+            example=0.2,
+        ),
+        SceneKey(
+            "camera",
+            "working_distance_mm",
+            None,
+            "float",
+            "lens camera: object distance from the lens to the (apparent) sheet (mm)",
+            positive=True,
+            example=300.0,
+        ),
+        SceneKey(
+            "camera",
+            "pixel_pitch_um",
+            6.5,
+            "float",
+            "lens camera: sensor pixel pitch (µm)",
+            positive=True,
+        ),
+        SceneKey(
+            "camera",
+            "sensor_pixels",
+            [2048, 2048],
+            "ints",
+            "lens camera: sensor pixels along x2 and x3 (sets the image; renderer.pixels unused)",
+        ),
+        SceneKey(
+            "camera",
+            "wavelength_nm",
+            532.0,
+            "float",
+            "lens camera: vacuum wavelength (nm)",
+            positive=True,
+        ),
+        SceneKey(
+            "camera",
+            "particle_diameter_um",
+            10.0,
+            "float",
+            "lens camera: tracer diameter (µm), for its geometric image",
+            positive=True,
+        ),
+        SceneKey(
+            "camera",
+            "window_thickness_mm",
+            0.0,
+            "float",
+            "lens camera: a flat window between fluid and lens (mm; 0: none)",
+            minimum=0.0,
+        ),
+        SceneKey("camera", "window_index", 1.52, "float", "window glass index", positive=True),
+        SceneKey(
+            "camera", "outside_index", 1.0, "float", "index between window and lens", positive=True
+        ),
+        SceneKey(
+            "sensor",
+            "noise",
+            False,
+            "bool",
+            "photon shot noise, read noise and background (false: the deterministic camera)",
+        ),
+        SceneKey(
+            "sensor",
+            "peak_electrons",
+            10000.0,
+            "float",
+            "mean photoelectrons at the peak of a tracer's reference image",
+            positive=True,
+        ),
+        SceneKey("sensor", "read_noise_e", 2.0, "float", "read noise (e- rms)", minimum=0.0),
+        SceneKey("sensor", "background_e", 0.0, "float", "background per pixel (e-)", minimum=0.0),
+        SceneKey("sensor", "full_well_e", 30000.0, "float", "full well (e-)", positive=True),
+        SceneKey(
+            "sensor",
+            "gain_e_per_count",
+            None,
+            "float",
+            "e- per count; default: full well / (2**bit_depth - 1)",
+            positive=True,
+            example=7.3,
+        ),
+        SceneKey(
+            "sensor",
+            "seed",
+            None,
+            "int",
+            "seed of the noise draws; default tracers.seed",
+            minimum=0,
+            example=0,
+        ),
+        SceneKey(
+            "mie", "enabled", False, "bool", "weight each ray by its Mie scattering intensity"
+        ),
+        SceneKey("mie", "diameter_um", 10.0, "float", "particle diameter (µm)", positive=True),
+        SceneKey(
+            "mie",
+            "particle_index",
+            1.59,
+            "float",
+            "particle index (1.59 polystyrene, 1.45 DEHS)",
+            positive=True,
+        ),
+        SceneKey("mie", "particle_absorption", 0.0, "float", "imaginary part of it", minimum=0.0),
+        SceneKey(
+            "mie",
+            "fluid_index",
+            None,
+            "float",
+            "index around the particle; default: the [fluid]'s, else 1",
+            positive=True,
+            example=1.335,
+        ),
+        SceneKey("mie", "wavelength_nm", 532.0, "float", "vacuum wavelength (nm)", positive=True),
+        SceneKey(
+            "mie",
+            "sheet_direction",
+            [0.0, 1.0, 0.0],
+            "vector",
+            "propagation direction of the light sheet (x1, x2, x3)",
+        ),
+        SceneKey(
+            "mie",
+            "polarisation",
+            "unpolarised",
+            "str",
+            "relative to each ray's scattering plane, or linear along polarisation_direction",
+            choices=("unpolarised", "perpendicular", "parallel", "linear"),
+        ),
+        SceneKey(
+            "mie",
+            "polarisation_direction",
+            [0.0, 0.0, 1.0],
+            "vector",
+            "the linear polarisation (perpendicular to the sheet direction)",
+        ),
+        SceneKey(
+            "fluid",
+            "kind",
+            "",
+            "str",
+            'the fluid of dT=/dS= cases: water, air or saltwater ("": none)',
+            choices=("", "water", "air", "saltwater"),
+        ),
+        SceneKey("fluid", "temperature_c", 20.0, "float", "base temperature (°C)"),
+        SceneKey(
+            "fluid", "salinity_g_kg", 0.0, "float", "base salinity (g/kg; saltwater)", minimum=0.0
+        ),
+        SceneKey("fluid", "pressure_pa", 101325.0, "float", "pressure (Pa; air)", positive=True),
+        SceneKey(
+            "fluid", "relative_humidity", 0.0, "float", "relative humidity 0..1 (air)", minimum=0.0
+        ),
+        SceneKey("fluid", "wavelength_nm", 532.0, "float", "vacuum wavelength (nm)", positive=True),
+        SceneKey(
+            "fluid",
+            "light_density",
+            1.0,
+            "float",
+            "the field's light fluid (dimensionless density): the warm or fresh one",
+            positive=True,
+        ),
+        SceneKey(
+            "fluid",
+            "heavy_density",
+            1.105,
+            "float",
+            "the field's heavy fluid: the cold or salty one",
+            positive=True,
+        ),
+        SceneKey(
             "run",
             "device",
             "",
             "str",
             'OpenCL device (see "rimcl devices"); "" = $RIMCL_DEVICE, then a GPU, then a CPU',
+        ),
+        SceneKey(
+            "run",
+            "engine",
+            "numpy",
+            "str",
+            "where tracer images are rendered and located: numpy (the reference engine)",
+            choices=choice["engine"],
         ),
         SceneKey(
             "run",
@@ -420,6 +682,36 @@ def _check_value(key, value, where):
                 + _suggest(value, key.choices)
             )
         return value
+    if key.kind == "ints":
+        if (
+            not isinstance(value, list)
+            or not value
+            or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value)
+        ):
+            raise RimclError(f"{name} must be a list of whole numbers >= 1, got {value!r}")
+        return [int(v) for v in value]
+    if key.kind == "vector":
+        if not (
+            isinstance(value, list)
+            and len(value) == 3
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        ):
+            raise RimclError(f"{name} must be three numbers [x1, x2, x3], got {value!r}")
+        return [float(v) for v in value]
+    if key.kind == "box":
+        pairs_ok = isinstance(value, list) and len(value) == 3
+        pairs_ok = pairs_ok and all(isinstance(p, list) and len(p) == 2 for p in value)
+        if not pairs_ok or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            for pair in value
+            for v in pair
+        ):
+            raise RimclError(
+                f"{name} must be three [lo, hi] pairs of numbers (x1, x2, x3), got {value!r}"
+            )
+        if any(lo >= hi for lo, hi in value):
+            raise RimclError(f"{name} needs lo < hi along every axis, got {value!r}")
+        return [[float(lo), float(hi)] for lo, hi in value]
     if key.kind == "bool":
         if not isinstance(value, bool):
             raise RimclError(f"{name} must be true or false, got {value!r}")
@@ -446,11 +738,14 @@ def _check_number(key, value, name):
 
 
 def _check_cases(names, where):
-    from rimcl.flow.cases import CASES, resolve_k_rho
+    from rimcl.flow.cases import CASES, fluid_case, resolve_k_rho
 
     resolved = []
     for case in names:
         try:
+            if fluid_case(case) is not None:
+                resolved.append(case.strip())
+                continue
             resolved.append(resolve_k_rho(case=case)[0])
         except RimclError as exc:
             raise RimclError(f"{where}: {exc}{_suggest(case.upper(), CASES)}") from None
@@ -500,6 +795,14 @@ def validate_scene(raw, where="the scene"):
                 )
                 raise RimclError(f"unknown key {section}.{name} in {where}{hint}")
             scene[section][name] = _check_value(key, value, where)
+    from rimcl.flow.cases import fluid_case
+
+    fluid_cases = [c for c in scene["cases"]["names"] if fluid_case(c) is not None]
+    if fluid_cases and not scene["fluid"]["kind"]:
+        raise RimclError(
+            f"cases {', '.join(fluid_cases)} in {where} need a fluid: set [fluid] kind "
+            "(water, air or saltwater)"
+        )
     unknown = set(scene["cases"]["thresholds"]) - set(scene["cases"]["names"])
     if unknown:
         raise RimclError(
@@ -509,7 +812,30 @@ def validate_scene(raw, where="the scene"):
     return scene
 
 
-def load_scene(path=None, overrides=None):
+#: Named scenes (``rimcl study --preset NAME``): keys that differ from the defaults.
+PRESETS = {
+    # The paper's own setting (its §3.2): the 100 x 100 fan, nearest-pixel binning then a
+    # Gaussian filter, 8192 px over the traced box, a ~10 px tracer image (σ 2.3 px at a
+    # threshold of 100 of 1023), thresholds 100 (air-like) and 500 (water-like), every
+    # image rescaled to its own 10-bit range, on a π³ clamped eighth of the 2π sample
+    # (the paper traced a 512³ eighth of the 1024³ box).
+    "paper": {
+        "field": {"box": [[0.0, math.pi], [0.0, math.pi], [0.0, math.pi]]},
+        "cases": {"thresholds": {"C0": 100.0, "C1": 100.0, "C2": 100.0, "C3": 500.0, "C4": 500.0}},
+        "camera": {"kind": "plane", "fan": 100},
+        "renderer": {
+            "kind": "paper",
+            "pixels": 8192,
+            "psf_sigma": 2.3,
+            "threshold": 100.0,
+            "centroid_weights": "grey",
+            "scale": "per_image",
+        },
+    },
+}
+
+
+def load_scene(path=None, overrides=None, preset=None):
     """Read a scene file (or the defaults), apply overrides, check everything.
 
     Parameters
@@ -519,6 +845,8 @@ def load_scene(path=None, overrides=None):
     overrides : dict, optional
         ``{"section.key": value}`` applied on top (command-line options); ``None`` values
         are ignored.
+    preset : str, optional
+        A name of :data:`PRESETS`, applied under the file's keys.
 
     Returns
     -------
@@ -527,6 +855,11 @@ def load_scene(path=None, overrides=None):
     """
     raw = {}
     where = "the default scene"
+    if preset is not None:
+        if preset not in PRESETS:
+            raise RimclError(f"unknown preset {preset!r}; choose from {', '.join(PRESETS)}")
+        raw = copy.deepcopy(PRESETS[preset])
+        where = f"the {preset} preset"
     if path is not None:
         path = Path(path)
         where = str(path)
@@ -535,9 +868,14 @@ def load_scene(path=None, overrides=None):
         except OSError as exc:
             raise RimclError(f"cannot read scene file {path}: {exc.strerror}") from None
         try:
-            raw = tomllib.loads(text)
+            from_file = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise RimclError(f"{path} is not valid TOML: {exc}") from None
+        for section, table in from_file.items():
+            if isinstance(table, dict) and isinstance(raw.get(section), dict):
+                raw[section] = {**raw[section], **table}
+            else:
+                raw[section] = table
         field_path = (
             raw.get("field", {}).get("path") if isinstance(raw.get("field"), dict) else None
         )
@@ -549,6 +887,14 @@ def load_scene(path=None, overrides=None):
             continue
         section, name = dotted.split(".", 1)
         raw.setdefault(section, {})[name] = value
+    if preset is not None:
+        # the preset's thresholds cover every paper case; keep those of the cases run
+        names = raw.get("cases", {}).get("names", default_scene()["cases"]["names"])
+        preset_thresholds = PRESETS[preset].get("cases", {}).get("thresholds", {})
+        thresholds = raw.get("cases", {}).get("thresholds", {})
+        for case in set(preset_thresholds) - set(names):
+            if thresholds.get(case) == preset_thresholds[case]:
+                del thresholds[case]
     return validate_scene(raw, where)
 
 
@@ -570,54 +916,3 @@ def scene_text(scene):
         lines += ["", f"[{section}]"]
         lines += [f"{name} = {_toml_value(v)}" for name, v in table.items() if v is not None]
     return "\n".join(lines) + "\n"
-
-
-def render_arguments(scene, case):
-    """Keyword arguments of :func:`rimcl.measure.run_render` for one case of a scene.
-
-    Parameters
-    ----------
-    scene : dict
-        A complete scene.
-    case : str
-        One of ``scene["cases"]["names"]``.
-
-    Returns
-    -------
-    dict
-    """
-    field, cases, tracers = scene["field"], scene["cases"], scene["tracers"]
-    camera, renderer = scene["camera"], scene["renderer"]
-    integrator, run = scene["integrator"], scene["run"]
-    return {
-        "field": field["path"] or None,
-        "case": case,
-        "tracers": tracers["count"],
-        "camera": camera["kind"],
-        "fan": camera["fan"],
-        "pupil_rays": camera["pupil_rays"],
-        "aperture_diameter": camera["aperture_diameter"],
-        "focal_length": camera["focal_length"],
-        "f_number": camera["f_number"],
-        "camera_distance": camera["distance"],
-        "view_angle": camera["view_angle"],
-        "renderer": renderer["kind"],
-        "pixels": renderer["pixels"],
-        "psf_sigma": renderer["psf_sigma"],
-        "threshold": cases["thresholds"].get(case, renderer["threshold"]),
-        "centroid_weights": renderer["centroid_weights"],
-        "max_window": renderer["max_window"],
-        "bit_depth": renderer["bit_depth"],
-        "interp": integrator["interp"],
-        "precision": integrator["precision"],
-        "step": integrator["step"],
-        "seed": tracers["seed"],
-        "frames": 3,
-        "start_frame": field["start_frame"],
-        "margin": tracers["margin"],
-        "x_sheet": field["x_sheet"],
-        "depth": field["depth"],
-        "ray_sample": run["ray_sample"],
-        "rays_per_batch": run["rays_per_batch"],
-        "device": run["device"] or None,
-    }

@@ -24,9 +24,10 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from rimcl import __version__
+from rimcl.config import MeasureConfig
 from rimcl.errors import RimclError
 from rimcl.provenance import atomic_path
-from rimcl.scene import load_scene, render_arguments, scene_text
+from rimcl.scene import load_scene, scene_text
 
 #: Scene keys that do not change the measurement: a study may resume with other values.
 RUN_ONLY_KEYS = (("run", "device"), ("run", "rays_per_batch"))
@@ -205,11 +206,16 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
             continue
         say(f"[{index}/{len(names)}] {name}: measuring")
         case_start = time.perf_counter()
-        arguments = render_arguments(scene, name)
+        config = MeasureConfig.from_scene(scene, name)
+        threshold = config.renderer.threshold
         result = run_render(
-            **arguments, reference=references.get(arguments["threshold"]), progress=progress
+            scene["field"]["path"] or None,
+            case=name,
+            config=config,
+            reference=references.get(threshold),
+            progress=progress,
         )
-        references[arguments["threshold"]] = result.reference
+        references[threshold] = result.reference
         write_render(path, result, overwrite=True)
         seconds[name] = time.perf_counter() - case_start
         ran.append(name)

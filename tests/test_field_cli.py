@@ -39,8 +39,8 @@ def test_info_on_the_sample_reports_grid_frames_and_delta_n_per_case():
     assert result.exit_code == 0, result.output
     info = json.loads(result.output)
     with FieldFile(sample_path()) as ff:
-        spread = max(ff.density(k).max() for k in range(3)) - min(
-            ff.density(k).min() for k in range(3)
+        spread = max(ff.density(k).max() for k in range(ff.n_frames)) - min(
+            ff.density(k).min() for k in range(ff.n_frames)
         )
         times = ff.times.tolist()
     assert info["shape_n3_n2_n1"] == [64, 64, 64] and info["boundary"] == "periodic"

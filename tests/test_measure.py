@@ -9,13 +9,22 @@ import pytest
 
 from rimcl.camera import PupilCamera, Scene
 from rimcl.centroid import TracerFlag
+from rimcl.config import MeasureConfig
 from rimcl.errors import RimclError
 from rimcl.flow.fieldfile import write_field
-from rimcl.measure import run_render, write_frame_image, write_render
+from rimcl.measure import merge_results, run_render, write_frame_image, write_render
 
 TIMES = (0.0, 0.01, 0.02)
 OMEGA = 2.0  # solid-body rotation rate of the linear-medium file (rad per time unit)
 GRADIENT, N0 = 5e-3, 1.33  # linear medium n = N0 + GRADIENT (x2 - 1/2)
+
+
+def render(field, *, case=None, k_rho=None, reference=None, **options):
+    """run_render with the flat option names of ``rimcl render``."""
+    config = MeasureConfig.from_options(**options)
+    return run_render(field, case=case, k_rho=k_rho, reference=reference, config=config)
+
+
 SMALL = {"tracers": 6, "fan": 5, "pupil_rays": 25, "pixels": 1024}
 
 
@@ -68,25 +77,27 @@ def linear_file(tmp_path_factory):
 @pytest.mark.parametrize("camera", ["plane", "pupil"])
 @pytest.mark.parametrize("renderer", ["exact", "paper"])
 def test_zero_k_rho_measures_exactly_the_reference(blobs_file, device, renderer, camera):
-    result = run_render(
-        blobs_file, k_rho=0.0, renderer=renderer, camera=camera, device=device, **SMALL
-    )
+    result = render(blobs_file, k_rho=0.0, renderer=renderer, camera=camera, device=device, **SMALL)
     rows = result.tracers
     assert np.all(np.isfinite(rows["x2_ref"])) and np.all(rows["flags"] == 0)
+    for name in ("x2_opt", "x3_opt"):
+        np.testing.assert_array_equal(rows[name], rows[f"{name}_ref"])
     for name in ("x2", "x3", "area", "perimeter", "circularity"):
         np.testing.assert_array_equal(rows[f"{name}_meas"], rows[f"{name}_ref"])
-    np.testing.assert_array_equal(result.velocity["u2_meas"], result.velocity["u2_ref"])
+    velocity = result.kinematics["velocity"]
+    np.testing.assert_array_equal(velocity["u2_meas"], velocity["u2_ref"])
+    np.testing.assert_array_equal(velocity["u2_opt"], velocity["u2_opt_ref"])
 
 
 def test_reference_is_reused_across_cases_and_checked(blobs_file, device):
-    fresh = run_render(blobs_file, case="C3", device=device, **SMALL)
-    reused = run_render(blobs_file, case="C3", device=device, reference=fresh.reference, **SMALL)
+    fresh = render(blobs_file, case="C3", device=device, **SMALL)
+    reused = render(blobs_file, case="C3", device=device, reference=fresh.reference, **SMALL)
     for name, values in fresh.tracers.items():
         np.testing.assert_array_equal(reused.tracers[name], values, err_msg=name)
-    zero = run_render(blobs_file, k_rho=0.0, device=device, reference=fresh.reference, **SMALL)
+    zero = render(blobs_file, k_rho=0.0, device=device, reference=fresh.reference, **SMALL)
     np.testing.assert_array_equal(zero.tracers["x2_meas"], zero.tracers["x2_ref"])
-    with pytest.raises(RimclError, match="differs in: tracers"):
-        run_render(
+    with pytest.raises(RimclError, match="differs in: shard, tracers"):
+        render(
             blobs_file,
             case="C3",
             device=device,
@@ -116,7 +127,7 @@ def _linear_medium_image_shift(camera, tracers):
 
 def test_linear_medium_shift_matches_float64_rays(linear_file, device):
     settings = {"tracers": 4, "pupil_rays": 64, "pixels": 2048, "margin": 0.2}
-    result = run_render(
+    result = render(
         linear_file,
         camera="pupil",
         camera_distance=20.0,
@@ -138,8 +149,35 @@ def test_linear_medium_shift_matches_float64_rays(linear_file, device):
     np.testing.assert_allclose(rows["x3_meas"], rows["x3_ref"], atol=0.01 * pixel)
 
 
+def test_slab_optics_error_is_the_closed_form_and_imaging_adds_little(linear_file, device):
+    """DESIGN §15: a uniform transverse gradient shifts every image point by
+    Δ = -L² (∂n/∂x2) / (2 n0); the optics mean carries it, the camera adds < 1 % at 16 bits."""
+    result = render(
+        linear_file,
+        camera="pupil",
+        camera_distance=20.0,
+        aperture_diameter=0.5,
+        frames=1,
+        tracers=6,
+        pupil_rays=64,
+        pixels=2048,
+        margin=0.2,
+        psf_sigma=2.0,
+        bit_depth=16,
+        threshold=2562.0,
+        device=device,
+    )
+    rows = result.tracers
+    closed_form = -(1.0**2) * GRADIENT / (2 * N0)
+    optics = rows["x2_opt"] - rows["x2_opt_ref"]
+    np.testing.assert_allclose(optics, closed_form, rtol=0.01)
+    np.testing.assert_allclose(rows["x2_opt_ref"], rows["x2_true"], rtol=0, atol=1e-12)
+    imaging = (rows["x2_meas"] - rows["x2_ref"]) - optics
+    assert np.all(np.abs(imaging) < 0.01 * abs(closed_form))
+
+
 def test_solid_body_rotation_truth(linear_file, device):
-    result = run_render(linear_file, tracers=40, fan=2, margin=0.2, device=device)
+    result = render(linear_file, tracers=40, fan=2, margin=0.2, device=device)
     rows = result.tracers
     start = np.stack([rows["x2_true"], rows["x3_true"]], axis=-1)[rows["frame"] == 0]
     offset = start - 0.5
@@ -155,27 +193,107 @@ def test_solid_body_rotation_truth(linear_file, device):
         pick = rows["frame"] == frame
         found = np.stack([rows["x2_true"][pick], rows["x3_true"][pick]], axis=-1)
         np.testing.assert_allclose(found, exact[-1], atol=1e-6 * result.attrs["length_L"])
-    np.testing.assert_allclose(result.velocity["u2_true"], -OMEGA * offset[:, 1], atol=1e-9)
-    np.testing.assert_allclose(result.velocity["u3_true"], OMEGA * offset[:, 0], atol=1e-9)
+    velocity = result.kinematics["velocity"]
+    at_start = velocity["frame"] == 0
+    np.testing.assert_allclose(velocity["u2_true"][at_start], -OMEGA * offset[:, 1], atol=1e-9)
+    np.testing.assert_allclose(velocity["u3_true"][at_start], OMEGA * offset[:, 0], atol=1e-9)
     # the true acceleration is the second difference of the exact positions
     chord = (exact[2] - 2 * exact[1] + exact[0]) / TIMES[1] ** 2
-    np.testing.assert_allclose(result.acceleration["a2_true"], chord[:, 0], atol=1e-3)
-    np.testing.assert_allclose(result.acceleration["a3_true"], chord[:, 1], atol=1e-3)
+    acceleration = result.kinematics["acceleration"]
+    np.testing.assert_allclose(acceleration["a2_true"], chord[:, 0], atol=1e-3)
+    np.testing.assert_allclose(acceleration["a3_true"], chord[:, 1], atol=1e-3)
+    # and the Lagrangian acceleration along the track is the centripetal one, -ω² (x - c)
+    for frame in range(3):
+        pick = rows["frame"] == frame
+        np.testing.assert_allclose(
+            rows["a2_true"][pick], -(OMEGA**2) * (exact[frame][:, 0] - 0.5), atol=1e-6
+        )
+
+
+@pytest.fixture(scope="module")
+def rotation_file(tmp_path_factory):
+    """The linear medium of ``linear_file`` over 9 frames 0.01 apart."""
+    x1, x2, x3, h = _grid(9, periodic=False)
+    velocity = [np.stack([0 * x1, -OMEGA * (x3 - 0.5), OMEGA * (x2 - 0.5)], axis=-1)] * 9
+    path = tmp_path_factory.mktemp("fields") / "rotation.h5"
+    write_field(
+        path,
+        delta_n=[GRADIENT * (x2 - 0.5)] * 9,
+        n_ref=N0,
+        times=np.arange(9) * 0.01,
+        origin=(0, 0, 0),
+        spacing=(h, h, h),
+        velocity=velocity,
+    )
+    return path
+
+
+@pytest.mark.parametrize("dt", [0.02, 0.015])
+def test_fitted_tracks_of_many_frames(rotation_file, device, dt):
+    """5 frames dt apart (stored, or interpolated between stored frames): the fit of the
+    uniform-medium optics means (the tracers themselves) recovers -ω² r to its own bias."""
+    frames = 5
+    result = render(
+        rotation_file, tracers=8, fan=2, margin=0.2, frames=frames, dt=dt, device=device
+    )
+    kinematics = result.kinematics
+    assert result.attrs["dt"] == pytest.approx(dt)
+    assert len(kinematics["velocity"]["id"]) == 8 * (frames - 1)
+    assert len(kinematics["acceleration"]["id"]) == 8 * (frames - 2)
+    fit = kinematics["acceleration_fit"]
+    assert set(fit["frame"]) == {2}
+    rows = result.tracers
+    centre = rows["frame"] == 2
+    radius = np.stack([rows["x2_true"][centre], rows["x3_true"][centre]], axis=-1) - 0.5
+    np.testing.assert_allclose(fit["a2_true"], -(OMEGA**2) * radius[:, 0], atol=1e-6)
+    bias = np.hypot(fit["a2_opt_ref"] - fit["a2_true"], fit["a3_opt_ref"] - fit["a3_true"])
+    assert np.all(bias < 2e-3 * OMEGA**2 * np.linalg.norm(radius, axis=1))
+    u_fit = kinematics["velocity_fit"]
+    np.testing.assert_allclose(u_fit["u2_true"], -OMEGA * radius[:, 1], atol=1e-9)
+    # an order-2 fit misses the rotation's third derivative: O(Δt² ω³ r), here < 2e-3 ω r
+    u_bias = np.hypot(
+        u_fit["u2_opt_ref"] - u_fit["u2_true"], u_fit["u3_opt_ref"] - u_fit["u3_true"]
+    )
+    assert np.all(u_bias < 2e-3 * OMEGA * np.linalg.norm(radius, axis=1))
 
 
 def test_batches_do_not_change_the_result(blobs_file, device):
-    whole = run_render(blobs_file, case="C2", device=device, **SMALL)
-    pieces = run_render(blobs_file, case="C2", device=device, rays_per_batch=40, **SMALL)
+    whole = render(blobs_file, case="C2", device=device, **SMALL)
+    pieces = render(blobs_file, case="C2", device=device, rays_per_batch=40, **SMALL)
     for name, values in whole.tracers.items():
         np.testing.assert_array_equal(pieces.tracers[name], values, err_msg=name)
     for name, values in whole.rays.items():
         np.testing.assert_array_equal(pieces.rays[name], values, err_msg=name)
 
 
+def test_shards_merge_into_the_whole_run(blobs_file, device):
+    config = MeasureConfig.from_options(device=device, frame_image=True, ray_sample=30, **SMALL)
+    whole = run_render(blobs_file, case="C3", config=config)
+    parts = [run_render(blobs_file, case="C3", config=config, shard=s) for s in ((0, 2), (2, 6))]
+    merged = merge_results(parts)
+    for name, values in whole.tracers.items():
+        np.testing.assert_array_equal(merged.tracers[name], values, err_msg=name)
+    for name, values in whole.rays.items():
+        np.testing.assert_array_equal(merged.rays[name], values, err_msg=name)
+    for group, table in whole.kinematics.items():
+        if table is None:
+            assert merged.kinematics[group] is None
+            continue
+        for name, values in table.items():
+            np.testing.assert_array_equal(merged.kinematics[group][name], values, err_msg=name)
+    assert merged.ray_attrs == whole.ray_attrs
+    np.testing.assert_array_equal(merged.frame_image, whole.frame_image)
+    np.testing.assert_array_equal(merged.reference.images["scale"], whole.reference.images["scale"])
+    again = run_render(blobs_file, case="C1", config=config, reference=merged.reference)
+    assert again.attrs["n_tracers"] == SMALL["tracers"]
+    with pytest.raises(RimclError, match="do not tile"):
+        merge_results(parts[1:])
+
+
 def test_memory_is_flat_in_the_number_of_tracers(blobs_file, device):
     def peak(tracers):
         tracemalloc.start()
-        run_render(
+        render(
             blobs_file,
             case="C1",
             frames=1,
@@ -197,7 +315,7 @@ def test_memory_is_flat_in_the_number_of_tracers(blobs_file, device):
 
 
 def test_ray_sample_and_status_counts(blobs_file, device):
-    result = run_render(blobs_file, case="C4", device=device, ray_sample=50, **SMALL)
+    result = render(blobs_file, case="C4", device=device, ray_sample=50, **SMALL)
     rays = result.rays
     assert len(rays["theta0"]) == 50
     assert set(rays) >= {"theta0", "deflection", "n_metric", "path_length", "displacement"}
@@ -217,7 +335,7 @@ def test_ray_sample_and_status_counts(blobs_file, device):
 
 
 def test_write_render_file_layout(blobs_file, device, tmp_path):
-    result = run_render(blobs_file, case="C1", device=device, frame_image=True, **SMALL)
+    result = render(blobs_file, case="C1", device=device, frame_image=True, **SMALL)
     path = tmp_path / "render.h5"
     write_render(path, result)
     with h5py.File(path, "r") as h5:
@@ -230,7 +348,9 @@ def test_write_render_file_layout(blobs_file, device, tmp_path):
         assert json.loads(h5.attrs["config"])["tracers"] == SMALL["tracers"]
         assert "versions" in h5.attrs and "device" in h5.attrs
         assert len(h5["tracers/x2_meas"]) == 3 * SMALL["tracers"]
-        assert len(h5["velocity/u2_true"]) == len(h5["acceleration/a3_meas"]) == 6
+        # the paper's differences: velocity at frames 0, 1; acceleration at frame 1
+        assert len(h5["velocity/u2_true"]) == 12 and len(h5["acceleration/a3_meas"]) == 6
+        assert "velocity_fit" not in h5  # 3 frames: fewer than the fit window
         assert h5["rays"].attrs["count_ok"] > 0
     with pytest.raises(RimclError, match="exists"):
         write_render(path, result)
@@ -259,17 +379,19 @@ def test_field_without_velocity_cannot_track(tmp_path, device):
         boundary="periodic",
     )
     with pytest.raises(RimclError, match="holds no velocity"):
-        run_render(path, case="C1", device=device, **SMALL)
-    single = run_render(path, case="C1", frames=1, device=device, **SMALL)
-    assert single.velocity is None and single.acceleration is None
+        render(path, case="C1", device=device, **SMALL)
+    single = render(path, case="C1", frames=1, device=device, **SMALL)
+    assert set(single.kinematics.values()) == {None}
 
 
 @pytest.mark.parametrize(
     ("kw", "match"),
     [
         ({"tracers": 0}, "at least 1"),
-        ({"frames": 4}, "frames must be"),
-        ({"start_frame": 1}, "frames up to 3"),
+        ({"frames": 0}, "frames must be"),
+        ({"frames": 4}, "need the field up to t = 0.03"),
+        ({"start_frame": 1}, "need the field up to t = 0.03"),
+        ({"fit_window": 4}, "odd number of frames"),
         ({"camera": "pinhole"}, "unknown camera"),
         ({"threshold": 2000}, "threshold"),
         ({"k_rho": -1.0, "case": None}, "K\\*rho"),
@@ -278,13 +400,13 @@ def test_field_without_velocity_cannot_track(tmp_path, device):
 def test_bad_requests_rejected(blobs_file, kw, match):
     settings = {**SMALL, "case": "C1", **kw}
     with pytest.raises(RimclError, match=match):
-        run_render(blobs_file, **settings)
+        render(blobs_file, **settings)
 
 
 def test_pupil_that_collects_no_ray_is_an_error(linear_file, device):
     # seen from 80° off axis, every ray leaves the clamped field through its side
     with pytest.raises(RimclError, match="no ray"):
-        run_render(
+        render(
             linear_file,
             camera="pupil",
             view_angle=80.0,

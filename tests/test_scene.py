@@ -2,13 +2,13 @@
 
 import pytest
 
+from rimcl.config import MeasureConfig
 from rimcl.errors import RimclError
 from rimcl.scene import (
     SCENE_KEYS,
     default_scene,
     default_scene_text,
     load_scene,
-    render_arguments,
     scene_text,
     validate_scene,
 )
@@ -87,7 +87,7 @@ def test_missing_scene_file(tmp_path):
         load_scene(tmp_path / "absent.toml")
 
 
-def test_render_arguments_map_every_scene_choice():
+def test_measure_config_maps_every_scene_choice():
     scene = validate_scene(
         {
             "cases": {"names": ["C1", "C4"], "thresholds": {"C4": 40.0}},
@@ -96,10 +96,12 @@ def test_render_arguments_map_every_scene_choice():
             "run": {"device": "pocl"},
         }
     )
-    air, water = render_arguments(scene, "C1"), render_arguments(scene, "C4")
-    assert air["threshold"] == default_scene()["renderer"]["threshold"]
-    assert water["threshold"] == 40.0
-    assert air["field"] == "/data/flow.h5"
-    assert (air["depth"], air["step"], air["device"], air["frames"]) == (2.0, 0.02, "pocl", 3)
-    assert render_arguments(default_scene(), "C0")["field"] is None
-    assert render_arguments(default_scene(), "C0")["device"] is None
+    air, water = MeasureConfig.from_scene(scene, "C1"), MeasureConfig.from_scene(scene, "C4")
+    assert air.renderer.threshold == default_scene()["renderer"]["threshold"]
+    assert water.renderer.threshold == 40.0
+    assert (air.depth, air.integrator.step, air.run.device) == (2.0, 0.02, "pocl")
+    assert air.time.frames == default_scene()["time"]["frames"]
+    default = MeasureConfig.from_scene(default_scene(), "C0")
+    assert default.run.device is None
+    assert default.camera.fan == default_scene()["camera"]["fan"]
+    assert default.tracers.count == default_scene()["tracers"]["count"]

@@ -69,3 +69,33 @@ def resolve_k_rho(case=None, k_rho=None):
     if not math.isfinite(value) or value < 0:
         raise RimclError(f"K*rho must be finite and >= 0, got {value!r}")
     return custom_case_name(value), value
+
+
+#: Prefixes of fluid cases: a temperature (K) or salinity (g/kg) difference of a fluid.
+FLUID_CASES = {"dT=": "temperature", "dS=": "salinity"}
+
+
+def fluid_case(name):
+    """The fluid difference a case name asks for, or None for a Gladstone–Dale case.
+
+    Parameters
+    ----------
+    name : str
+        ``"dT=<kelvin>"`` or ``"dS=<g/kg>"`` (between the light and the heavy fluid).
+
+    Returns
+    -------
+    (str, float) or None
+        ``("temperature" | "salinity", difference)``.
+    """
+    text = str(name).strip()
+    for prefix, quantity in FLUID_CASES.items():
+        if text.lower().startswith(prefix.lower()):
+            try:
+                value = float(text[len(prefix) :])
+            except ValueError:
+                raise RimclError(f"{name!r}: {prefix}<value> needs a number") from None
+            if not math.isfinite(value) or value < 0:
+                raise RimclError(f"{name!r}: the difference must be finite and >= 0")
+            return quantity, value
+    return None

@@ -11,13 +11,20 @@ Layout (``rimcl_schema = "field"``, ``schema_version = 1``), readable with plain
         or delta_n         (n3, n2, n1) float32, n - n_ref, with attribute n_ref (float64)
         density_gradient   (n3, n2, n1, 3) float32, optional, components along x1, x2, x3
         velocity           (n3, n2, n1, 3) float32, optional, components along x1, x2, x3
+        or velocity_sheet  (n3, n2, 2) float32, optional, instead of velocity: the in-plane
+                           velocity (u2, u3) on the light-sheet plane x1 = const only, at
+                           the nodes (x3, x2), with attribute x1 (float64, length units)
     /frames/0001 ...
 
 Frames are numbered from 0 in time order. A file holds either ``density`` (turned into a
 refractive index with a Gladstone–Dale product ``G``: ``δn = G (ρ - mean ρ)``,
-``n_ref = 1 + G mean ρ``) or ``delta_n`` directly, in every frame.
+``n_ref = 1 + G mean ρ``) or ``delta_n`` directly, in every frame. A velocity, when
+stored, is in every frame, and either in full (``velocity``) or on one sheet plane
+(``velocity_sheet``, the same ``x1`` in every frame): the sheet plane is all that tracking
+tracers in that sheet needs, at 2/(3 n1) of the size, so a file can hold many frames.
 """
 
+import functools
 import json
 import math
 from pathlib import Path
@@ -32,6 +39,8 @@ from rimcl.provenance import atomic_path, stamp_h5
 
 SCHEMA = "field"
 SCHEMA_VERSION = 1
+#: Dataset name of the sheet-only velocity (see the module docstring).
+SHEET_VELOCITY = "velocity_sheet"
 
 # relative slack on times at the ends of the stored range (rounding of t0 + k dt)
 _TIME_SLACK = 1e-9
@@ -87,6 +96,8 @@ def write_field(
     origin,
     spacing,
     velocity=None,
+    velocity_sheet=None,
+    sheet_x1=None,
     density_gradient=None,
     boundary="clamp",
     attrs=None,
@@ -112,6 +123,12 @@ def write_field(
         Position of node ``(0, 0, 0)`` and the grid spacing along ``x1, x2, x3``.
     velocity : sequence of ndarray, each (n3, n2, n1, 3), optional
         Flow velocity, components along ``x1, x2, x3``.
+    velocity_sheet : sequence of ndarray, each (n3, n2, 2), optional
+        Instead of ``velocity``: the in-plane velocity ``(u2, u3)`` on the plane
+        ``x1 = sheet_x1`` only, at the nodes ``(x3, x2)``.
+    sheet_x1 : float, optional
+        The plane of ``velocity_sheet`` (length units): within the grid along ``x1``, or
+        anywhere for a periodic grid. Only with ``velocity_sheet``.
     density_gradient : sequence of ndarray, each (n3, n2, n1, 3), optional
         ``∇ρ`` (1/length) along ``x1, x2, x3``; only with ``density``. When absent,
         readers compute it.
@@ -163,12 +180,15 @@ def write_field(
     for name, frames in vectors.items():
         if frames is not None and any(f.shape[:3] != shape for f in frames):
             raise RimclError(f"{name} frames must have shape {(*shape, 3)}")
+    sheet = _sheet_frames(velocity_sheet, sheet_x1, velocity, shape, count)
     origin = np.asarray(origin, dtype=np.float64).reshape(-1)
     spacing = np.asarray(spacing, dtype=np.float64).reshape(-1)
     if origin.size != 3 or not np.all(np.isfinite(origin)):
         raise RimclError(f"origin must be 3 finite numbers, got {origin.tolist()}")
     if spacing.size != 3 or not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
         raise RimclError(f"spacing must be 3 positive numbers, got {spacing.tolist()}")
+    if sheet is not None:
+        _check_sheet_x1(sheet_x1, origin[0], spacing[0], shape[2], boundary, "sheet_x1")
     attrs = dict(attrs or {})
     written = Path(path)
     with atomic_path(written, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
@@ -191,7 +211,42 @@ def write_field(
             for name, frames in vectors.items():
                 if frames is not None:
                     _write_array(group, name, frames[k])
+            if sheet is not None:
+                _write_array(group, SHEET_VELOCITY, sheet[k]).attrs["x1"] = float(sheet_x1)
     return written
+
+
+def _sheet_frames(velocity_sheet, sheet_x1, velocity, shape, count):
+    """The ``velocity_sheet`` frames of :func:`write_field`, checked, or None."""
+    if velocity_sheet is None:
+        if sheet_x1 is not None:
+            raise RimclError("sheet_x1 only goes with velocity_sheet")
+        return None
+    if velocity is not None:
+        raise RimclError("give either velocity or velocity_sheet, not both")
+    if sheet_x1 is None:
+        raise RimclError("velocity_sheet needs sheet_x1, the x1 of its plane")
+    frames = [np.asarray(v) for v in velocity_sheet]
+    if len(frames) != count:
+        raise RimclError(f"velocity_sheet has {len(frames)} frames, expected {count}")
+    want = (*shape[:2], 2)
+    for k, frame in enumerate(frames):
+        if frame.shape != want:
+            raise RimclError(f"velocity_sheet frame {k} must have shape {want}, got {frame.shape}")
+        if not np.all(np.isfinite(frame)):
+            raise RimclError(f"velocity_sheet frame {k} holds NaN or infinite values")
+    return frames
+
+
+def _check_sheet_x1(x1, origin1, spacing1, n1, boundary, what):
+    """Refuse a sheet plane ``x1`` that is not finite, or outside a clamped grid."""
+    try:
+        x1 = float(x1)
+    except (TypeError, ValueError):
+        raise RimclError(f"{what} must be a number, got {x1!r}") from None
+    hi = origin1 + (n1 - 1) * spacing1
+    if not math.isfinite(x1) or (boundary != "periodic" and not origin1 <= x1 <= hi):
+        raise RimclError(f"{what} = {x1:g} must lie in the field along x1 ({origin1:g} .. {hi:g})")
 
 
 def _write_array(group, name, values):
@@ -327,8 +382,45 @@ class FieldFile:
 
     @property
     def has_velocity(self):
-        """Whether every frame holds a velocity."""
+        """Whether every frame holds a velocity: in full, or on one sheet plane."""
+        return self.has_full_velocity or self.velocity_sheet_x1 is not None
+
+    @property
+    def has_full_velocity(self):
+        """Whether every frame holds the full 3-D ``velocity``."""
         return all("velocity" in group for group in self._frames)
+
+    @functools.cached_property
+    def velocity_sheet_x1(self):
+        """The ``x1`` of the stored sheet-only velocity (float), or None if there is none.
+
+        Raises RimclError when only some frames hold it, or with different planes or shapes.
+        """
+        holding = [SHEET_VELOCITY in group for group in self._frames]
+        if not any(holding):
+            return None
+        if not all(holding):
+            missing = [g.name for g, has in zip(self._frames, holding, strict=True) if not has]
+            raise RimclError(f"{self.path}: {SHEET_VELOCITY} is missing from {missing[0]}")
+        planes = set()
+        for group in self._frames:
+            dataset = group[SHEET_VELOCITY]
+            if dataset.shape != (*self.shape[:2], 2):
+                raise RimclError(
+                    f"{self.path}: {group.name}/{SHEET_VELOCITY} must have shape "
+                    f"{(*self.shape[:2], 2)}, got {dataset.shape}"
+                )
+            if "x1" not in dataset.attrs:
+                raise RimclError(f"{self.path}: {group.name}/{SHEET_VELOCITY} has no x1 attribute")
+            planes.add(float(dataset.attrs["x1"]))
+        if len(planes) > 1:
+            raise RimclError(
+                f"{self.path}: {SHEET_VELOCITY} lies on different planes x1 = {sorted(planes)}"
+            )
+        x1 = planes.pop()
+        where = f"{self.path}: {SHEET_VELOCITY} x1"
+        _check_sheet_x1(x1, self.origin[0], self.spacing[0], self.shape[2], self.boundary, where)
+        return x1
 
     @property
     def has_density_gradient(self):
@@ -373,6 +465,11 @@ class FieldFile:
 
     def velocity(self, frame):
         """Velocity of one frame, float32 ``(n3, n2, n1, 3)``, components along x1, x2, x3."""
+        if not self.has_full_velocity and self.velocity_sheet_x1 is not None:
+            raise RimclError(
+                f"{self.path} stores only the in-plane velocity on the sheet "
+                f"x1 = {self.velocity_sheet_x1:g}, not the full velocity"
+            )
         return self._read(frame, "velocity")
 
     def time_weights(self, time, method="auto"):
@@ -498,7 +595,14 @@ class FieldFile:
         -------
         ndarray, float64, shape (n3, n2, 2)
             ``u2, u3`` at the nodes ``(x3, x2)`` of the sheet.
+
+        Notes
+        -----
+        A file that stores only ``velocity_sheet`` gives the stored plane (interpolated in
+        time) and refuses any other ``x1``.
         """
+        if not self.has_full_velocity and self.velocity_sheet_x1 is not None:
+            return self._stored_sheet_velocity(time, x1, method)
         n1 = self.shape[2]
         position = (float(x1) - self.origin[0]) / self.spacing[0]
         if self.boundary == "periodic":
@@ -522,6 +626,21 @@ class FieldFile:
             return (1.0 - frac) * lower + frac * upper
 
         return self._blend(time, plane, method)
+
+    def _stored_sheet_velocity(self, time, x1, method):
+        """:meth:`sheet_velocity` from the stored ``velocity_sheet`` plane."""
+        stored = self.velocity_sheet_x1
+        offset = float(x1) - stored
+        if self.boundary == "periodic":
+            period = self.shape[2] * self.spacing[0]
+            offset -= period * round(offset / period)
+        # a millionth of a cell: the same plane written and asked for in different roundings
+        if not abs(offset) <= 1e-6 * self.spacing[0]:
+            raise RimclError(
+                f"{self.path} stores the sheet velocity only on x1 = {stored:g}, "
+                f"not on x1 = {float(x1):g}; put the sheet there or use a file with full velocity"
+            )
+        return self._blend(time, lambda frame: self._read(frame, SHEET_VELOCITY), method)
 
     def _sheet_planes(self, frame, below, above):
         """The velocity planes ``(u2, u3)`` at x1 nodes ``below`` and ``above``, cached."""

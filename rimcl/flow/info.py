@@ -44,10 +44,20 @@ def describe_field_file(path):
                 "std": float(values.std(dtype=np.float64)),
             }
             if ff.has_velocity:
-                velocity = ff.velocity(k).astype(np.float64)
-                frame["velocity_rms"] = np.sqrt(np.mean(velocity**2, axis=(0, 1, 2))).tolist()
-                frame["speed_max"] = float(np.sqrt(np.max(np.sum(velocity**2, axis=-1))))
+                # a sheet-only file has (u2, u3) on its plane: rms of those two
+                if ff.has_full_velocity:
+                    velocity = ff.velocity(k).astype(np.float64)
+                else:
+                    velocity = ff.sheet_velocity(ff.times[k], ff.velocity_sheet_x1)
+                components = velocity.reshape(-1, velocity.shape[-1])
+                frame["velocity_rms"] = np.sqrt(np.mean(components**2, axis=0)).tolist()
+                frame["speed_max"] = float(np.sqrt(np.max(np.sum(components**2, axis=-1))))
             frames.append(frame)
+        velocity_bytes = 0
+        if ff.has_full_velocity:
+            velocity_bytes = voxels * 12
+        elif ff.has_velocity:
+            velocity_bytes = n3 * n2 * 8
         spread = max(f["max"] for f in frames) - min(f["min"] for f in frames)
         if ff.kind == "density":
             delta_n_max = {
@@ -69,13 +79,14 @@ def describe_field_file(path):
             "n_frames": ff.n_frames,
             "times": ff.times.tolist(),
             "has_velocity": ff.has_velocity,
+            "velocity_sheet_x1": None if ff.has_full_velocity else ff.velocity_sheet_x1,
             "has_density_gradient": ff.has_density_gradient,
             "frames": frames,
             "file_bytes": ff.path.stat().st_size,
             "memory_bytes_per_frame": {
                 "field_trilinear": voxels * _BYTES_TRILINEAR,
                 "field_bspline3": voxels * _BYTES_BSPLINE,
-                "velocity": voxels * 12 if ff.has_velocity else 0,
+                "velocity": velocity_bytes,
             },
             "delta_n_max": delta_n_max,
         }
@@ -88,6 +99,12 @@ def _mib(count):
 def format_description(info):
     """Human-readable text of :func:`describe_field_file`'s result."""
     n3, n2, n1 = info["shape_n3_n2_n1"]
+    sheet = info.get("velocity_sheet_x1")
+    velocity_header = ""
+    if sheet is not None:
+        velocity_header = "  sheet velocity rms (x2, x3)   |u|max"
+    elif info["has_velocity"]:
+        velocity_header = "  velocity rms (x1, x2, x3)     |u|max"
     lines = [
         f"{info['path']}",
         f"  title     {info['title'] or '-'}",
@@ -101,14 +118,14 @@ def format_description(info):
         + (" ..." if info["n_frames"] > 8 else ""),
         f"  holds     {info['kind']}"
         + (" + density_gradient" if info["has_density_gradient"] else "")
-        + (" + velocity" if info["has_velocity"] else ""),
+        + (" + velocity" if info["has_velocity"] and sheet is None else "")
+        + (f" + velocity_sheet (u2, u3 on x1 = {sheet:g})" if sheet is not None else ""),
         f"  memory    file {_mib(info['file_bytes'])}; per frame as a field: "
         f"{_mib(info['memory_bytes_per_frame']['field_trilinear'])} (trilinear), "
         f"{_mib(info['memory_bytes_per_frame']['field_bspline3'])} (bspline3)",
         "",
         f"  {'frame':>5}  {'time':>10}  {info['kind'] + ' min':>13}  {'max':>11}  {'mean':>11}"
-        f"  {'std':>10}"
-        + ("  velocity rms (x1, x2, x3)     |u|max" if info["has_velocity"] else ""),
+        f"  {'std':>10}" + velocity_header,
     ]
     for f in info["frames"]:
         row = (

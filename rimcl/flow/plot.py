@@ -74,9 +74,10 @@ def slice_figure(path, *, frame=0, time=None, plane="x2x3", at=None, quantity="a
                 )
         position = ff.origin[normal] + node * ff.spacing[normal]
         wanted = ["density", "gradient", "velocity"] if quantity == "all" else [quantity]
-        if "velocity" in wanted and not ff.has_velocity:
+        if "velocity" in wanted and not ff.has_full_velocity:
             if quantity == "velocity":
-                raise RimclError(f"{path} holds no velocity")
+                only = f" but on the sheet x1 = {ff.velocity_sheet_x1:g}" if ff.has_velocity else ""
+                raise RimclError(f"{path} holds no velocity{only}")
             wanted.remove("velocity")
         optical = case is not None or k_rho is not None or ff.kind == "delta_n"
         if ff.kind == "density" and not optical:

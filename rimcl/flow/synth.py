@@ -17,7 +17,10 @@ projecting the velocity onto divergence-free fields at every stage, so ``∇·u 
 round-off. FFTs use :mod:`scipy.fft` with all cores.
 
 The run goes from rest to the peak of turbulent kinetic energy (the state of the JHTDB
-frames the paper used) and then records frames ``Δt`` apart.
+frames the paper used) and then records frames ``Δt`` apart: the density, and either the
+full velocity or only the in-plane velocity ``(u2, u3)`` on one light-sheet plane
+``x1 = const`` (evaluated spectrally, so exact at any ``x1``), which keeps a file of many
+frames small.
 
 The initial blobs are drawn on a fixed set of low wavenumbers (``|k_i| <= 10``), so one
 seed gives the same initial condition on every grid of 32³ or more: a finer grid resolves
@@ -75,8 +78,9 @@ class SynthResult:
         Frame times (time units ``L0/U0``).
     density : list of ndarray, float64, each (N, N, N)
         Density per frame (light fluid 1, heavy 1.105), array order ``(n3, n2, n1)``.
-    velocity : list of ndarray, float64, each (N, N, N, 3)
-        Velocity per frame, components along ``x1, x2, x3``.
+    velocity : list of ndarray, float64, each (N, N, N, 3), or None
+        Velocity per frame, components along ``x1, x2, x3``; None when only the sheet
+        velocity was kept.
     density_gradient : list of ndarray or None
         Spectral ``∇ρ`` per frame (exact for the band-limited field), if requested.
     history : dict of str to ndarray
@@ -85,14 +89,21 @@ class SynthResult:
     params : dict
         Everything that defines the run (grid, seed, Reynolds number, ...) and its
         outcome (peak time, ``k_max η``).
+    velocity_sheet : list of ndarray, float64, each (N, N, 2), or None
+        In-plane velocity ``(u2, u3)`` per frame on the plane ``x1 = sheet_x1``, at the
+        nodes ``(x3, x2)``; None when the full velocity was kept.
+    sheet_x1 : float or None
+        The plane of ``velocity_sheet`` (length units).
     """
 
     times: np.ndarray
     density: list
-    velocity: list
+    velocity: list | None
     density_gradient: list | None
     history: dict
     params: dict
+    velocity_sheet: list | None = None
+    sheet_x1: float | None = None
 
     @property
     def spacing(self):
@@ -289,6 +300,22 @@ class BoussinesqSolver:
         """Physical velocity, ``(n3, n2, n1, 3)``, components along ``x1, x2, x3``."""
         return np.moveaxis(self.inverse(u_hat), 0, -1)
 
+    def sheet_velocity(self, u_hat, x1):
+        """In-plane velocity ``(u2, u3)`` on the plane ``x1``, ``(n3, n2, 2)``.
+
+        The Fourier series along ``x1`` is summed at ``x1`` itself, so the plane is exact
+        for the band-limited field at any ``x1`` (not only at nodes).
+        """
+        n = self.grid
+        # half-spectrum weights of the real series along x1 (the Nyquist mode is dealiased)
+        weight = np.full(n // 2 + 1, 2.0)
+        weight[0] = 1.0
+        if n % 2 == 0:
+            weight[-1] = 1.0
+        phase = weight * np.exp(1j * self.k[0][0, 0, :] * float(x1))
+        planes = scipy.fft.ifftn(u_hat[1:3], axes=(-3, -2), workers=-1)
+        return np.moveaxis((planes @ phase).real / n, 0, -1)
+
     def density(self, rho_hat):
         """Physical density, ``(n3, n2, n1)``."""
         return self.inverse(rho_hat)
@@ -310,6 +337,7 @@ def synthesize(
     t_start=None,
     t_max=100.0,
     store_gradient=True,
+    sheet_x1=None,
     progress=False,
 ):
     """Run the Boussinesq solver from rest and record frames of the flow.
@@ -337,6 +365,9 @@ def synthesize(
         Give up if no kinetic-energy peak appears by this time.
     store_gradient : bool
         Also return the exact spectral density gradient of each frame.
+    sheet_x1 : float, optional
+        Keep only the in-plane velocity ``(u2, u3)`` on the plane ``x1 = sheet_x1``
+        (length units; the box is periodic, so any value) instead of the full velocity.
     progress : bool
         Show a progress bar (tqdm).
 
@@ -355,6 +386,8 @@ def synthesize(
         raise RimclError("need at least one frame and a positive frame spacing")
     if t_start is not None and not t_start >= 0:
         raise RimclError(f"the start time must be >= 0, got {t_start}")
+    if sheet_x1 is not None and not math.isfinite(sheet_x1):
+        raise RimclError(f"the sheet velocity plane x1 must be finite, got {sheet_x1}")
     solver = BoussinesqSolver(grid, reynolds, schmidt, gravity_axis)
     u_hat, rho_hat = solver.initial_state(seed)
     history = {"time": [], "kinetic_energy": [], "density_variance": [], "dissipation": []}
@@ -389,7 +422,7 @@ def synthesize(
                 break
             u_hat, rho_hat, time = new_u, new_rho, time + dt
     start = time
-    result_frames = {"density": [], "velocity": [], "density_gradient": []}
+    result_frames = {"density": [], "velocity": [], "velocity_sheet": [], "density_gradient": []}
     times = []
     bar = tqdm(
         total=frames, desc="frames", unit="frame", disable=None if progress else True, leave=False
@@ -404,7 +437,10 @@ def synthesize(
                 record(time, u_hat, rho_hat)
             times.append(time)
             result_frames["density"].append(solver.density(rho_hat))
-            result_frames["velocity"].append(solver.velocity(u_hat))
+            if sheet_x1 is None:
+                result_frames["velocity"].append(solver.velocity(u_hat))
+            else:
+                result_frames["velocity_sheet"].append(solver.sheet_velocity(u_hat, sheet_x1))
             if store_gradient:
                 result_frames["density_gradient"].append(solver.density_gradient(rho_hat))
             bar.update()
@@ -424,6 +460,8 @@ def synthesize(
         "interface_width": INTERFACE_WIDTH,
         "frames": int(frames),
         "frame_dt": float(frame_dt),
+        "velocity_stored": "full" if sheet_x1 is None else "sheet",
+        "sheet_x1": None if sheet_x1 is None else float(sheet_x1),
         "start": "time" if t_start is not None else "kinetic-energy peak",
         "t_first_frame": float(start),
         "kmax_eta_last_frame": solver.kmax_eta(u_hat),
@@ -432,10 +470,12 @@ def synthesize(
     return SynthResult(
         times=np.array(times),
         density=result_frames["density"],
-        velocity=result_frames["velocity"],
+        velocity=result_frames["velocity"] if sheet_x1 is None else None,
         density_gradient=result_frames["density_gradient"] if store_gradient else None,
         history=history,
         params=params,
+        velocity_sheet=result_frames["velocity_sheet"] if sheet_x1 is not None else None,
+        sheet_x1=None if sheet_x1 is None else float(sheet_x1),
     )
 
 
@@ -466,6 +506,8 @@ def write_synth(result, path, *, overwrite=False):
         path,
         density=result.density,
         velocity=result.velocity,
+        velocity_sheet=result.velocity_sheet,
+        sheet_x1=result.sheet_x1,
         density_gradient=result.density_gradient,
         times=result.times,
         origin=(0.0, 0.0, 0.0),

@@ -1,0 +1,182 @@
+"""The lens camera in physical units (rimcl.camera.LensCamera) against closed forms."""
+
+import numpy as np
+import pytest
+
+from rimcl.camera import FlatWindow, LensCamera, PupilCamera, Scene
+from rimcl.errors import RimclError
+
+# a 2π box seen whole by a 2048-px sensor of 6.5 µm pitch at M = 0.2: 66.6 mm on the sheet
+LENGTH_M = 2048 * 6.5e-6 / 0.2 / (2 * np.pi)
+
+
+def _scene():
+    return Scene(0.0, 2 * np.pi, np.zeros(2), np.full(2, 2 * np.pi), True)
+
+
+def _camera(**kw):
+    settings = {"length_m": LENGTH_M, "magnification": 0.2, "rays": 256, **kw}
+    return LensCamera(_scene(), **settings)
+
+
+def test_optics_closed_forms():
+    camera = _camera()  # 50 mm f/8, 6.5 µm pixels, 532 nm, 10 µm tracers
+    assert camera.working_distance_mm == pytest.approx(300.0)  # f (1 + 1/M)
+    assert camera.aperture_mm == pytest.approx(6.25)
+    assert camera.numerical_aperture == pytest.approx(np.sin(np.arctan(3.125 / 300.0)))
+    assert camera.pixel_size * LENGTH_M == pytest.approx(32.5e-6)  # pitch / M, in metres
+    np.testing.assert_allclose(camera.sensor_fov, 2 * np.pi)
+    assert camera.depth_of_field_mm == pytest.approx(4 * 6.0**2 * 64 * 532e-6)  # 4.90 mm
+    assert camera.diffraction_diameter_um == pytest.approx(2.44 * 1.2 * 0.532 * 8)  # 12.46 µm
+    assert camera.image_diameter_um == pytest.approx(np.hypot(2.0, 12.461568))
+    assert camera.psf_sigma_px == pytest.approx(12.621041 / (4 * 6.5), rel=1e-6)
+
+
+def test_working_distance_gives_the_magnification():
+    by_distance = _camera(magnification=None, working_distance_mm=300.0)
+    assert by_distance.magnification == pytest.approx(0.2)
+    assert by_distance.pixel_size == pytest.approx(_camera().pixel_size)
+
+
+def test_without_a_window_it_is_a_pupil_camera():
+    camera = _camera()
+    pupil = PupilCamera(camera.scene, 6.25e-3 / LENGTH_M, 0.3 / LENGTH_M, view_angle=0.0, rays=256)
+    tracers = np.array([[1.0, 2.0], [3.0, 5.5]])
+    np.testing.assert_allclose(camera.directions(tracers), pupil.directions(tracers), atol=1e-14)
+    directions = camera.directions(tracers).reshape(-1, 3)
+    starts = np.repeat(camera.scene.in_sheet(tracers), camera.rays_per_tracer, axis=0)
+    exits = starts + (camera.scene.depth / directions[:, :1]) * directions
+    assert camera.collected(exits, directions).all()
+    # the image points are the back-projection onto the sheet, i.e. the tracers
+    images = camera.image_points(exits, directions)
+    np.testing.assert_allclose(images, starts[:, 1:], atol=1e-12)
+
+
+def _oblique_rays(angle):
+    directions = np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=1)
+    positions = np.zeros((len(angle), 3))
+    positions[:, 0] = 2 * np.pi
+    return positions, directions
+
+
+def test_glass_plate_shifts_a_ray_by_the_textbook_displacement():
+    # a plate in air (the fluid is air too): the ray leaves parallel, displaced sideways by
+    # Δ = t sin θ (1 - cos θ / sqrt(n² - sin² θ))
+    window = FlatWindow(thickness_mm=10.0, glass_index=1.5, outside_index=1.0)
+    camera = _camera(window=window)
+    angle = np.radians([5.0, 20.0, 40.0])
+    positions, directions = _oblique_rays(angle)
+    out_pos, out_dir = camera.through_window(positions, directions)
+    np.testing.assert_allclose(out_dir, directions, atol=1e-15)
+    t = 10e-3 / LENGTH_M
+    # distance between the incoming line and the outgoing parallel line
+    offset = out_pos - positions
+    displacement = np.linalg.norm(
+        offset - np.sum(offset * directions, axis=1)[:, None] * directions, axis=1
+    )
+    expected = t * np.sin(angle) * (1 - np.cos(angle) / np.sqrt(1.5**2 - np.sin(angle) ** 2))
+    np.testing.assert_allclose(displacement, expected, rtol=1e-12)
+    np.testing.assert_allclose(out_pos[:, 0], positions[:, 0] + t)
+
+
+def test_window_of_equal_indices_leaves_rays_alone():
+    window = FlatWindow(thickness_mm=8.0, glass_index=1.33, outside_index=1.33)
+    camera = _camera(window=window, fluid_index=1.33)
+    assert camera.focus_x1 == pytest.approx(camera.scene.x_sheet, abs=1e-12)
+    positions, directions = _oblique_rays(np.radians([0.0, 3.0, 30.0]))
+    out_pos, out_dir = camera.through_window(positions, directions)
+    np.testing.assert_allclose(out_dir, directions, atol=1e-15)
+    np.testing.assert_allclose(
+        out_pos, positions + (0.008 / LENGTH_M / directions[:, :1]) * directions
+    )
+    straight = positions[:, 1:] - (2 * np.pi / directions[:, :1]) * directions[:, 1:]
+    np.testing.assert_allclose(camera.image_points(positions, directions), straight, atol=1e-12)
+
+
+def test_water_to_air_follows_snell_and_reflects_beyond_the_critical_angle():
+    window = FlatWindow(thickness_mm=10.0, glass_index=1.52, outside_index=1.0)
+    camera = _camera(window=window, fluid_index=1.335)
+    angle = np.radians([10.0, 30.0, 60.0])  # critical angle water-air: 48.5°
+    positions, directions = _oblique_rays(angle)
+    _, out_dir = camera.through_window(positions, directions)
+    np.testing.assert_allclose(out_dir[:2, 1], 1.335 * np.sin(angle[:2]), rtol=1e-14)
+    assert np.all(np.isnan(out_dir[2])) and not camera.collected(positions, directions)[2]
+
+
+def _through_uniform_fluid(camera, tracers):
+    directions = camera.directions(tracers)
+    starts = camera.scene.in_sheet(tracers)[:, None, :]
+    exits = starts + (camera.scene.depth / directions[..., :1]) * directions
+    return exits.reshape(-1, 3), directions.reshape(-1, 3)
+
+
+def test_directions_through_a_window_reach_their_pupil_points():
+    window = FlatWindow(thickness_mm=10.0, glass_index=1.52, outside_index=1.0)
+    camera = _camera(window=window, fluid_index=1.335)
+    tracers = np.array([[np.pi, np.pi], [1.0, 5.0]])
+    exits, directions = _through_uniform_fluid(camera, tracers)
+    positions, outside = camera.through_window(exits, directions)
+    run = (camera.pupil.centre[0] - positions[:, 0]) / outside[:, 0]
+    hits = (positions + run[:, None] * outside).reshape(2, -1, 3)
+    np.testing.assert_allclose(hits, np.broadcast_to(camera.aim_points(), hits.shape), atol=1e-12)
+    assert camera.collected(exits, directions).all()
+
+
+def test_window_aberration_is_symmetric_and_third_order():
+    window = FlatWindow(thickness_mm=10.0, glass_index=1.52, outside_index=1.0)
+    spread = []
+    for f_number in (8.0, 16.0):
+        camera = _camera(window=window, fluid_index=1.335, f_number=f_number, rays=1024)
+        centre = np.array([[np.pi, np.pi]])  # on the lens axis
+        images = camera.image_points(*_through_uniform_fluid(camera, centre))
+        # focused on the paraxial image of the sheet: the rays centre on the tracer ...
+        np.testing.assert_allclose(images.mean(axis=0), centre[0], atol=1e-8)
+        spread.append(np.max(np.linalg.norm(images - centre, axis=1)))
+    # ... with a spherical-aberration blur that falls as the cube of the aperture
+    assert spread[0] / spread[1] == pytest.approx(8.0, rel=0.05)
+    assert spread[0] < 0.01 * _camera().pixel_size
+
+
+def test_uniform_medium_through_the_tracer(device):
+    import rimcl
+
+    window = FlatWindow(thickness_mm=10.0, glass_index=1.52, outside_index=1.0)
+    camera = _camera(window=window, fluid_index=1.335, rays=64)
+    tracers = np.array([[np.pi, np.pi], [2.0, 4.0]])
+    field = rimcl.Field.from_arrays(
+        np.zeros((8, 8, 8)),
+        spacing=(2 * np.pi / 8,) * 3,
+        n_ref=1.335,
+        boundary="periodic",
+    )
+    starts = np.repeat(camera.scene.in_sheet(tracers), camera.rays_per_tracer, axis=0)
+    directions = camera.directions(tracers).reshape(-1, 3)
+    result = rimcl.trace_rays(field, starts, directions, x_end=camera.scene.x_end, device=device)
+    assert (result.status == 0).all() and camera.collected(result.end_pos, result.end_dir).all()
+    exits, _ = _through_uniform_fluid(camera, tracers)
+    expected = camera.image_points(exits, directions)
+    traced = camera.image_points(result.end_pos, result.end_dir)
+    np.testing.assert_allclose(traced, expected, atol=1e-4 * camera.pixel_size)
+
+
+def test_describe_names_the_kind_and_the_derived_optics():
+    record = _camera(window=FlatWindow(5.0)).describe()
+    assert record["camera"] == "lens" and record["window"]["thickness_mm"] == 5.0
+    assert record["psf_sigma_px"] == pytest.approx(_camera().psf_sigma_px)
+
+
+@pytest.mark.parametrize(
+    ("kw", "match"),
+    [
+        ({"working_distance_mm": 300.0}, "magnification or a working distance"),
+        ({"magnification": None, "working_distance_mm": 40.0}, "exceed the focal length"),
+        ({"magnification": 50.0}, "inside the field"),
+        ({"f_number": 0.0}, "f_number"),
+        ({"length_m": "big"}, "length_m"),
+        ({"pixels": (0, 10)}, "1 x 1 pixels"),
+        ({"window": FlatWindow(10.0), "magnification": 12.0}, "inside the field or the window"),
+    ],
+)
+def test_bad_lens_camera_rejected(kw, match):
+    with pytest.raises(RimclError, match=match):
+        _camera(**kw)
