@@ -144,7 +144,11 @@ def analyze(
 @click.option("--view-angle", type=float, default=0.0, show_default=True, help="Degrees.")
 @click.option("--start-frame", default=0, show_default=True, help="Field frame of exposure A.")
 @click.option(
-    "--dt", type=float, default=None, help="Time between exposures [default: next frame]."
+    "--dt",
+    type=float,
+    default=0.1,
+    show_default=True,
+    help="Time between exposures (0.1 on the sample: 1.3 px rms at 512 px).",
 )
 @click.option("--x-sheet", type=float, default=None, help="Sheet centre x1 [default: scene].")
 @window_option
@@ -212,40 +216,50 @@ def render(
       rimcl piv render --case C4 --camera pupil --pupil-rays 32 -o water
       rimcl piv analyze water_field_A.tif water_field_B.tif -o water_vectors.h5
     """
-    from rimcl.piv_images import PivImaging, check_outputs, run_piv_render, write_piv_render
+    from rimcl.config import CameraConfig, IntegratorConfig, RunConfig
+    from rimcl.piv import PivSettings
+    from rimcl.piv_images import (
+        PivConfig,
+        PivImaging,
+        check_outputs,
+        run_piv_render,
+        write_piv_render,
+    )
 
     check_outputs(prefix, overwrite)
-    imaging = PivImaging(
-        pixels=pixels,
-        density=density,
-        diameter=diameter,
-        sheet_thickness=sheet_thickness,
-        bit_depth=bit_depth,
-        peak_fraction=peak_fraction,
+    piv_config = PivConfig(
+        imaging=PivImaging(
+            pixels=pixels,
+            density=density,
+            diameter=diameter,
+            sheet_thickness=sheet_thickness,
+            bit_depth=bit_depth,
+            peak_fraction=peak_fraction,
+        ),
+        settings=PivSettings(window=window, overlap=overlap),
+        dt=dt,
+        start_frame=start_frame,
+        x_sheet=x_sheet,
+        seed=seed,
     )
-    result = run_piv_render(
-        field_path,
-        case=case_or_default(case, k_rho),
-        k_rho=k_rho,
-        imaging=imaging,
-        window=window,
-        overlap=overlap,
-        camera=camera,
+    camera_config = CameraConfig(
+        kind=camera,
         fan=fan,
         pupil_rays=pupil_rays,
         aperture_diameter=aperture_diameter,
         focal_length=focal_length,
         f_number=f_number,
-        camera_distance=camera_distance,
+        distance=camera_distance,
         view_angle=view_angle,
-        start_frame=start_frame,
-        dt=dt,
-        x_sheet=x_sheet,
-        interp=interp,
-        precision=precision,
-        step=parse_step(step),
-        seed=seed,
-        device=device_spec,
+    )
+    result = run_piv_render(
+        field_path,
+        case=case_or_default(case, k_rho),
+        k_rho=k_rho,
+        piv=piv_config,
+        camera=camera_config,
+        integrator=IntegratorConfig(interp=interp, precision=precision, step=parse_step(step)),
+        run=RunConfig(device=device_spec),
     )
     paths = write_piv_render(prefix, result, overwrite=overwrite)
     truth = result.reference.truth
@@ -259,4 +273,5 @@ def render(
         f"true displacement over {window} px windows: rms dx {rms[0]:.3g} px, dy {rms[1]:.3g} px"
     )
     click.echo(f"rays through the field: {result.field.ray_counts}")
+    click.echo(f"motion: {result.motion}")
     click.echo("wrote " + ", ".join(str(path) for path in paths.values()))

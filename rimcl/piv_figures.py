@@ -27,10 +27,8 @@ from rimcl.figures import (
     _case_colors,
     _case_label,
     _draw_pdf_series,
-    _error_against_g,
     _finish_axes,
     _new_figure,
-    _panel_letter,
     _pdf_series,
     _relative_errors,
 )
@@ -49,6 +47,46 @@ def _pixel_size(stats):
 
 def _tables(cases):
     return [velocity_table(v, _pixel_size(s), s["dt"]) for v, s in cases]
+
+
+def _letter(ax, letter):
+    ax.set_title(f"({letter})", loc="left", fontweight="bold")
+
+
+def _log_against_g(ax, ylabel, title):
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("G = Kρ (Gladstone–Dale product)")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, which="major", alpha=0.3)
+
+
+def _summary_against_g(ax, stats, statistic, ylabel, title):
+    """|statistic| of the relative velocity errors against G for u2, u3, |u|; the data.
+
+    Cases with G <= 0 or undefined (fluid cases) have no place on the log axis; a
+    negative value is drawn open.
+    """
+    data = []
+    for key, marker in (("u2", "o"), ("u3", "s"), ("magnitude", "^")):
+        points = [
+            (case["G"], case["velocity"][key][statistic])
+            for case in stats
+            if np.isfinite(case["G"]) and case["G"] > 0
+        ]
+        points = [(g, value) for g, value in points if value]
+        g_values = [g for g, _ in points]
+        values = [abs(value) for _, value in points]
+        signs = [int(np.sign(value)) for _, value in points]
+        (line,) = ax.plot(g_values, values, "-" + marker, label=key)
+        for g, value, sign in zip(g_values, values, signs, strict=True):
+            if sign < 0:
+                ax.plot(g, value, marker, mfc="white", color=line.get_color(), ms=5)
+        data.append({"label": key, "G": g_values, "abs_value": values, "sign": signs})
+    _log_against_g(ax, ylabel, title)
+    ax.legend(fontsize=7, title="open: negative" if statistic == "systematic" else None)
+    return data
 
 
 def _stride(shape):
@@ -99,7 +137,7 @@ def _vectors(cases):
         title = "window-averaged truth" if kind == "true" else f"measured through {stats['name']}"
         shown = "all vectors" if k == 1 else f"every {k}th vector"
         ax.set_title(f"{title}, {shown}", fontsize=8, loc="right")
-        _panel_letter(ax, letter)
+        _letter(ax, letter)
         panels[letter] = {
             "x_px": x.tolist(),
             "y_px": y.tolist(),
@@ -180,31 +218,26 @@ def _error_pdfs(cases):
         else:
             xlabel = f"ε_u{component} / u{component}  (relative PIV refraction error)"
         _draw_pdf_series(ax, series, edges, colors, xlabel)
-        _panel_letter(ax, letter)
+        _letter(ax, letter)
         panels[letter] = {"quantity": xlabel, "bin_edges": edges.tolist(), "series": series}
-    keys = ("u2", "u3", "magnitude")
-    panels["d"] = _error_against_g(
+    panels["d"] = _summary_against_g(
         axes[1, 0],
         stats,
-        lambda c: c["velocity"],
-        keys,
         "systematic",
         "|systematic error| = |mean(ε/truth)|",
         "systematic relative error (fraction)",
     )
-    _panel_letter(axes[1, 0], "d")
-    panels["e"] = _error_against_g(
+    _letter(axes[1, 0], "d")
+    panels["e"] = _summary_against_g(
         axes[1, 1],
         stats,
-        lambda c: c["velocity"],
-        keys,
         "random",
         "random error = std(ε/truth)",
         "random relative error (fraction)",
     )
-    _panel_letter(axes[1, 1], "e")
+    _letter(axes[1, 1], "e")
     ax = axes[1, 2]
-    positive = [s for s in stats if s["G"] > 0]
+    positive = [s for s in stats if np.isfinite(s["G"]) and s["G"] > 0]
     g_values = [s["G"] for s in positive]
     parts = {}
     for key, style, label in (
@@ -215,14 +248,9 @@ def _error_pdfs(cases):
         values = [s["displacement_px"][key] for s in positive]
         ax.plot(g_values, [np.nan if v is None else v for v in values], style, label=label)
         parts[key] = values
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("G = Kρ (Gladstone–Dale product)")
-    ax.set_ylabel("rms per-vector error (px)")
-    ax.set_title("displacement errors in pixels", fontsize=9)
-    ax.grid(True, which="major", alpha=0.3)
+    _log_against_g(ax, "rms per-vector error (px)", "displacement errors in pixels")
     ax.legend(fontsize=7)
-    _panel_letter(ax, "f")
+    _letter(ax, "f")
     panels["f"] = {"G": g_values, **parts}
     figure.suptitle("PIV velocity error from refraction, u' − u^ref")
     return figure, {"panels": panels}

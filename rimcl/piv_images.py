@@ -8,18 +8,26 @@ A PIV camera records full frames of many tracers lit by a light sheet of finite 
   (``|x1 - x_sheet| <= thickness / 2``), so twice as many are seeded;
 - **light sheet**: Gaussian along ``x1``, ``I = exp(-8 (x1 - x_sheet)² / thickness²)``
   (``thickness`` is the full 1/e² width), peak 1 at ``x_sheet``;
-- **motion**: each tracer is carried by the 3-D flow velocity from the first exposure
-  to the second (RK4, cubic B-spline in space, linear in time between stored frames), so
-  it moves across the sheet and its brightness changes, and pairs are lost as in
-  experiments;
-- **imaging**: each tracer's rays (aimed by any camera of :mod:`rimcl.camera`) are traced
-  by :func:`rimcl.trace_rays` through the field to the exit plane; the lens's depth of
-  field is taken to cover the sheet, so each ray is imaged where its straight backward
-  extension meets the tracer's own plane ``x1 = const`` (what ``trace_rays`` returns as
-  ``image_pos``; perspective of out-of-plane positions is not modelled). Every collected ray
-  deposits a pixel-integrated Gaussian of σ = d/4 pixels (``d`` the particle image
-  diameter) with weight = the sheet intensity at its tracer, by the exact renderer of
-  :mod:`rimcl.render`, into one full frame;
+- **motion**: with the field's full 3-D velocity, each tracer is carried by it from the
+  first exposure to the second (RK4, cubic B-spline in space, linear in time between
+  stored frames), so it moves across the sheet, its brightness changes, and pairs are
+  lost as in experiments. A field that stores only the in-plane velocity on the sheet
+  (``velocity_sheet``, as the shipped sample) moves every tracer, at any depth, with the
+  sheet's ``(u2, u3)`` at its ``(x2, x3)`` and keeps its ``x1``: **out-of-plane motion and
+  the loss of pairs it causes are then not modelled** (the truth file's ``motion``
+  attribute says which);
+- **imaging**: each tracer's rays (aimed by any camera of :mod:`rimcl.camera`, built by
+  :meth:`rimcl.config.CameraConfig.build`) are traced by :func:`rimcl.trace_rays` from the
+  tracer's own position through the field to the exit plane. The plane and pupil cameras
+  image each ray where its straight backward extension meets the tracer's own plane
+  ``x1 = const`` (``image_pos``; their depth of field is taken to cover the sheet, so
+  perspective of out-of-plane positions is not modelled); the lens camera images it on
+  the plane it is focused on (:meth:`LensCamera.image_points`, through its window if any),
+  which adds the perspective and defocus of tracers off that plane, and sets the pixel
+  size, frame and point spread. Every collected ray deposits a pixel-integrated Gaussian
+  of σ = d/4 pixels (``d`` the particle image diameter) with weight = the sheet intensity
+  at its tracer, by the exact renderer of :mod:`rimcl.render`, into one full frame (no Mie
+  weights);
 - **camera counts**: one scale factor for all frames (an isolated tracer at the sheet
   centre, all rays collected, centred on a pixel, peaks at ``peak_fraction`` of full
   scale), rounded and clipped to ``bit_depth`` bits; no sensor noise.
@@ -36,8 +44,8 @@ Files (:func:`write_piv_render`): ``<prefix>_field_A.tif``, ``<prefix>_field_B.t
 ``<prefix>_truth.h5`` (``rimcl_schema = "piv_truth"``): per tracer, positions at both
 exposures (``x1, x2, x3``, length units, and ``col, row``, pixels), sheet intensities and
 the light-weighted mean image points of its collected rays per medium; the true
-displacement averaged over each interrogation window of the final PIV grid; the
-configuration and versions.
+displacement averaged over each interrogation window of the final PIV grid; the motion
+model (root attribute ``motion``), the configuration and versions.
 """
 
 import dataclasses
@@ -51,13 +59,21 @@ import numpy as np
 from scipy.ndimage import map_coordinates, spline_filter
 from scipy.special import ndtr
 
-from rimcl.camera import Scene, seed_tracers
+from rimcl.camera import LensCamera, Scene, seed_tracers
+from rimcl.config import (
+    DEFAULT_RAYS_PER_BATCH,
+    CameraConfig,
+    FluidConfig,
+    IntegratorConfig,
+    RunConfig,
+)
 from rimcl.errors import RimclError
-from rimcl.piv import WindowGrid, write_tiff
+from rimcl.flow.crop import CroppedSource
+from rimcl.piv import PivSettings, WindowGrid, write_tiff
 from rimcl.provenance import atomic_path, check_output, stamp_h5
 from rimcl.render import Renderer, quantize
 from rimcl.trace import STATUS_NAMES, trace_rays
-from rimcl.track import integrate_tracks
+from rimcl.track import SheetVelocity, integrate_tracks
 
 TRUTH_SCHEMA = "piv_truth"
 TRUTH_SCHEMA_VERSION = 1
@@ -65,7 +81,6 @@ TRUTH_SCHEMA_VERSION = 1
 #: sheet intensity falls to exp(-8) = 3e-4: beyond, a tracer adds less than a count.
 SEED_HALF_WIDTH = 1.0
 MEDIA = ("field", "uniform")
-DEFAULT_RAYS_PER_BATCH = 1 << 17  # rays traced per batch: ~40 MB of host memory
 
 
 def sheet_intensity(x1, x_sheet, thickness):
@@ -144,40 +159,57 @@ class PivImaging:
         """σ of the point spread (pixels), ``d / 4``."""
         return self.diameter / 4.0
 
-    def pixel_size(self, scene):
-        """Pixel side (length units): the wider field-of-view side over ``pixels``."""
+    def pixel_size(self, scene, camera=None):
+        """Pixel side (length units): a lens camera's own, else the wider field-of-view side
+        over ``pixels``."""
+        if isinstance(camera, LensCamera):
+            return float(camera.pixel_size)
         return float(np.max(scene.fov_size)) / int(self.pixels)
 
-    def thickness(self, scene):
+    def thickness(self, scene, camera=None):
         """The sheet's 1/e² thickness (length units); default 8 pixels."""
         if self.sheet_thickness is None:
-            return 8.0 * self.pixel_size(scene)
+            return 8.0 * self.pixel_size(scene, camera)
         return float(self.sheet_thickness)
 
-    def frame_shape(self, scene):
-        """Frame ``(rows, columns)`` covering the field of view (rows along ``x3``)."""
+    def frame_shape(self, scene, camera=None):
+        """Frame ``(rows, columns)`` (rows along ``x3``): a lens camera's sensor, else the
+        field of view."""
+        if isinstance(camera, LensCamera):
+            return int(camera.pixels[1]), int(camera.pixels[0])
         extent = np.ceil(scene.fov_size / self.pixel_size(scene) - 1e-9).astype(int)
         return int(extent[1]), int(extent[0])
 
-    def renderer(self, scene):
-        """The exact renderer of these frames (:class:`rimcl.render.Renderer`)."""
+    def renderer(self, scene, camera=None):
+        """The exact renderer of these frames (:class:`rimcl.render.Renderer`).
+
+        A lens camera sets the pixel size, the frame origin (its sensor centred on the
+        field of view) and the point spread (its tracer image); otherwise the frame starts
+        at the field of view's corner and σ = ``diameter / 4``.
+        """
+        if isinstance(camera, LensCamera):
+            origin = scene.fov_centre - 0.5 * camera.sensor_fov
+            psf_sigma = camera.psf_sigma_px
+        else:
+            origin, psf_sigma = scene.fov_lo, self.psf_sigma
         return Renderer(
             "exact",
-            self.pixel_size(scene),
-            tuple(scene.fov_lo),
-            self.psf_sigma,
+            self.pixel_size(scene, camera),
+            tuple(float(v) for v in origin),
+            float(psf_sigma),
             int(self.max_window),
             int(self.bit_depth),
         )
 
-    def scale(self, rays_per_tracer):
-        """Counts per unit of light: an in-focus tracer centred on a pixel peaks at
-        ``peak_fraction`` of full scale (each of its rays carrying light 1)."""
-        centre_pixel = (ndtr(0.5 / self.psf_sigma) - ndtr(-0.5 / self.psf_sigma)) ** 2
+    def scale(self, rays_per_tracer, psf_sigma):
+        """Counts per unit of light: an in-focus tracer centred on a pixel, its point
+        spread of σ ``psf_sigma`` pixels, peaks at ``peak_fraction`` of full scale (each of
+        its rays carrying light 1)."""
+        centre_pixel = (ndtr(0.5 / psf_sigma) - ndtr(-0.5 / psf_sigma)) ** 2
         full_scale = 2 ** int(self.bit_depth) - 1
         return self.peak_fraction * full_scale / (rays_per_tracer * centre_pixel)
 
-    def describe(self, scene=None):
+    def describe(self, scene=None, camera=None):
         record = {
             "pixels": int(self.pixels),
             "particle_image_density_ppp": float(self.density),
@@ -194,35 +226,42 @@ class PivImaging:
         }
         if scene is not None:
             record.update(
-                sheet_thickness=self.thickness(scene),
-                pixel_size=self.pixel_size(scene),
-                frame_rows_columns=list(self.frame_shape(scene)),
+                sheet_thickness=self.thickness(scene, camera),
+                pixel_size=self.pixel_size(scene, camera),
+                frame_rows_columns=list(self.frame_shape(scene, camera)),
+                psf_sigma_px=self.renderer(scene, camera).psf_sigma,
             )
         return record
 
 
-def seed_particles(scene, imaging, rng):
-    """Tracers over the field of view plus the band, across the sheet's thickness.
+def seed_particles(scene, imaging, rng, camera=None):
+    """Tracers over the frame plus the band around it, across the sheet's thickness.
 
     Parameters
     ----------
     scene : rimcl.camera.Scene
     imaging : PivImaging
     rng : numpy.random.Generator
+    camera : optional
+        The camera (a lens camera sets the frame; others take the field of view).
 
     Returns
     -------
     ndarray, float64, shape (N, 3)
         Positions ``(x1, x2, x3)``.
     """
-    pixel = imaging.pixel_size(scene)
+    renderer = imaging.renderer(scene, camera)
+    pixel = renderer.pixel_size
+    rows, cols = imaging.frame_shape(scene, camera)
     band = imaging.band * pixel
-    seeded = dataclasses.replace(scene, fov_lo=scene.fov_lo - band, fov_hi=scene.fov_hi + band)
+    lo = np.asarray(renderer.origin, dtype=np.float64) - band
+    hi = lo + pixel * np.array([cols, rows]) + 2 * band
+    seeded = dataclasses.replace(scene, fov_lo=lo, fov_hi=hi)
     area_px = float(np.prod(seeded.fov_size)) / pixel**2
     # density counts the tracers within the 1/e² thickness; the slab seeded is wider
     count = max(1, round(imaging.density * area_px * 2 * SEED_HALF_WIDTH))
     in_plane = seed_tracers(count, seeded, rng, margin=0.0)
-    half = SEED_HALF_WIDTH * imaging.thickness(scene)
+    half = SEED_HALF_WIDTH * imaging.thickness(scene, camera)
     depth = scene.x_sheet + rng.uniform(-half, half, count)
     return np.column_stack([depth, in_plane])
 
@@ -268,7 +307,21 @@ def _add_window(frame, window, image):
         ]
 
 
-def _expose(field, positions, intensity, scene, camera, renderer, shape, options, batch, totals):
+def _rays_of(camera, positions):
+    """Initial unit directions of each tracer's rays, shape (B, K, 3).
+
+    Aimed from each tracer's own depth at the camera's aim points; a lens behind a window
+    solves its directions from the sheet (:meth:`LensCamera.directions`), which moves the
+    rays of a tracer a fraction of the sheet thickness off the pupil points it aims at:
+    the pupil test after tracing still decides which are collected.
+    """
+    if isinstance(camera, LensCamera) and camera.window is not None:
+        return camera.directions(positions[:, 1:])
+    aim = camera.aim_points()[None, :, :] - positions[:, None, :]
+    return aim / np.linalg.norm(aim, axis=-1, keepdims=True)
+
+
+def _expose(field, positions, intensity, camera, scene, renderer, shape, options, batch, totals):
     """Light of one exposure: trace every tracer's rays, render them into one frame.
 
     Returns
@@ -278,21 +331,17 @@ def _expose(field, positions, intensity, scene, camera, renderer, shape, options
     optics : ndarray, shape (N, 2)
     collected : ndarray of int, shape (N,)
     """
-    aims = camera.aim_points()
-    rays = len(aims)
+    rays = camera.rays_per_tracer
     light = np.zeros(shape)
     optics = np.full((len(positions), 2), np.nan)
     collected_count = np.zeros(len(positions), dtype=np.int64)
     for first in range(0, len(positions), batch):
         ids = np.arange(first, min(first + batch, len(positions)))
-        # the camera aims from each tracer's own depth, not from the sheet centre
-        aim = aims[None, :, :] - positions[ids, None, :]
-        aim /= np.linalg.norm(aim, axis=-1, keepdims=True)
         start = time.perf_counter()
         result = trace_rays(
             field,
             np.repeat(positions[ids], rays, axis=0),
-            aim.reshape(-1, 3),
+            _rays_of(camera, positions[ids]).reshape(-1, 3),
             x_end=scene.x_end,
             **options,
         )
@@ -301,7 +350,12 @@ def _expose(field, positions, intensity, scene, camera, renderer, shape, options
         collected = ok & camera.collected(result.end_pos, result.end_dir)
         totals["status"] += np.bincount(result.status, minlength=len(STATUS_NAMES))
         totals["vignetted"] += int(np.count_nonzero(ok & ~collected))
-        points = result.image_pos[:, 1:].reshape(len(ids), rays, 2)
+        if isinstance(camera, LensCamera):
+            # a lens images every ray onto the plane it is focused on (through its window)
+            points = camera.image_points(result.end_pos, result.end_dir)
+        else:
+            points = result.image_pos[:, 1:]
+        points = points.reshape(len(ids), rays, 2)
         collected = collected.reshape(len(ids), rays)
         for k, tracer in enumerate(ids):
             kept = points[k][collected[k]]
@@ -327,7 +381,6 @@ def image_pair(
     scene,
     camera,
     imaging,
-    thickness=None,
     trace_options=None,
     rays_per_batch=DEFAULT_RAYS_PER_BATCH,
 ):
@@ -340,10 +393,9 @@ def image_pair(
     positions : ndarray, shape (2, N, 3)
         Tracer positions ``(x1, x2, x3)`` at A and B (length units).
     scene : rimcl.camera.Scene
-    camera : rimcl.camera.PlaneCamera or PupilCamera
+    camera : PlaneCamera, PupilCamera or LensCamera
+        Built by :meth:`rimcl.config.CameraConfig.build`.
     imaging : PivImaging
-    thickness : float, optional
-        Sheet thickness (default ``imaging.thickness(scene)``).
     trace_options : dict, optional
         ``step``, ``interp``, ``precision``, ``device`` for :func:`rimcl.trace_rays`.
     rays_per_batch : int
@@ -356,9 +408,9 @@ def image_pair(
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim != 3 or positions.shape[0] != 2 or positions.shape[2] != 3:
         raise RimclError(f"tracer positions must have shape (2, N, 3), got {positions.shape}")
-    thickness = imaging.thickness(scene) if thickness is None else float(thickness)
-    renderer = imaging.renderer(scene)
-    shape = imaging.frame_shape(scene)
+    thickness = imaging.thickness(scene, camera)
+    renderer = imaging.renderer(scene, camera)
+    shape = imaging.frame_shape(scene, camera)
     batch = max(1, int(rays_per_batch) // camera.rays_per_tracer)
     totals = {
         "status": np.zeros(len(STATUS_NAMES), dtype=np.int64),
@@ -366,7 +418,7 @@ def image_pair(
         "outside_window": 0,
         "seconds": {"trace": 0.0, "render": 0.0},
     }
-    scale = imaging.scale(camera.rays_per_tracer)
+    scale = imaging.scale(camera.rays_per_tracer, renderer.psf_sigma)
     images, optics, collected, saturated = [], [], [], []
     for field, where in zip(fields, positions, strict=True):
         intensity = sheet_intensity(where[:, 0], scene.x_sheet, thickness)
@@ -374,8 +426,8 @@ def image_pair(
             field,
             where,
             intensity,
-            scene,
             camera,
+            scene,
             renderer,
             shape,
             trace_options or {},
@@ -515,8 +567,8 @@ class FlowVelocity:
     """
 
     def __init__(self, source, frames):
-        if not source.has_velocity:
-            raise RimclError(f"{source.path} holds no velocity, which moving PIV tracers needs")
+        if not source.has_full_velocity:
+            raise RimclError(f"{source.path} holds no full 3-D velocity")
         self.times = np.asarray(source.times, dtype=np.float64)[list(frames)]
         self.origin = np.asarray(source.origin, dtype=np.float64)
         self.spacing = np.asarray(source.spacing, dtype=np.float64)
@@ -559,8 +611,112 @@ class FlowVelocity:
         )
 
 
-#: RK4 steps between the two exposures (the PTV tracks use as many per frame interval).
+#: RK4 steps between the two exposures at least, and at least this many per stored frame
+#: interval (the rule of the PTV tracks, :mod:`rimcl.measure`).
 TRACKING_SUBSTEPS = 8
+#: Default time between exposures (time units): on the shipped sample (velocity rms 0.14
+#: on the sheet, frames 0.02 apart) 0.1 moves tracers 1.3 px rms and up to 5 px at 512 px,
+#: the few pixels PIV is made for, from stored frames only.
+DEFAULT_DT = 0.1
+MOTION_3D = "3-D: tracers carried by the full velocity (u1, u2, u3); out-of-plane loss modelled"
+MOTION_SHEET = (
+    "in-plane only: the field file stores the velocity on the sheet plane alone, so every "
+    "tracer, at any depth across the sheet, moves with the sheet's (u2, u3) and keeps its x1; "
+    "out-of-plane motion and the loss of pairs it causes are NOT modelled"
+)
+
+
+@dataclasses.dataclass(frozen=True)
+class PivConfig:
+    """One PIV measurement besides the field, the case and the camera.
+
+    Attributes
+    ----------
+    imaging : PivImaging
+        How frames are made.
+    settings : rimcl.piv.PivSettings
+        The correlation; its last window and overlap also set the truth's windows.
+    dt : float, optional
+        Time between exposures A and B (time units); None: the field's stored spacing
+        after ``start_frame``. Exposure B's field is a stored frame where ``t_A + dt`` is
+        one, else interpolated in time (:meth:`FieldFile.field_at`).
+    start_frame : int
+        Stored frame of exposure A.
+    box : sequence of 3 (lo, hi) pairs, optional
+        Measure in this box cut out of the field (as :class:`rimcl.config.MeasureConfig`).
+    x_sheet, depth : float, optional
+        Sheet centre and traced depth. Defaults: :meth:`Scene.from_grid`; a clamped field
+        with full velocity moves its default sheet one seeding half-width inside the grid;
+        a field with only the sheet velocity keeps the sheet on its stored plane.
+    seed : int
+        Seeds the tracers; the same seed gives the same tracers in every case.
+    """
+
+    imaging: PivImaging = PivImaging()
+    settings: PivSettings = dataclasses.field(default_factory=PivSettings)
+    dt: float = DEFAULT_DT
+    start_frame: int = 0
+    box: tuple = None
+    x_sheet: float = None
+    depth: float = None
+    seed: int = 0
+
+    def describe(self):
+        return {
+            "dt": self.dt,
+            "start_frame": int(self.start_frame),
+            "box": None if self.box is None else [list(pair) for pair in self.box],
+            "x_sheet": self.x_sheet,
+            "depth": self.depth,
+            "seed": int(self.seed),
+            "piv": self.settings.describe(),
+        }
+
+
+#: The camera of ``rimcl piv render`` and :func:`run_piv_render` unless one is given: the
+#: paper's plane camera with 8 x 8 rays per tracer (a PIV frame holds thousands of tracers).
+PIV_CAMERA = CameraConfig(kind="plane", fan=8)
+
+
+def move_tracers(source, scene, start, times, frames):
+    """True tracer positions at both exposures, and how they were moved.
+
+    With the full velocity, tracers move in 3-D (:class:`FlowVelocity`), across the sheet
+    too; with only the sheet velocity (``velocity_sheet``), every tracer moves with the
+    sheet's in-plane velocity at its ``(x2, x3)`` and keeps its depth (module docstring).
+    RK4 with at least :data:`TRACKING_SUBSTEPS` steps per stored frame interval.
+
+    Parameters
+    ----------
+    source : FieldFile or CroppedSource
+    scene : rimcl.camera.Scene
+    start : ndarray, shape (N, 3)
+        Positions at exposure A.
+    times : (float, float)
+        Times of exposures A and B.
+    frames : list of int
+        The stored frames spanning them.
+
+    Returns
+    -------
+    positions : ndarray, float64, shape (2, N, 3)
+    motion : str
+        :data:`MOTION_3D` or :data:`MOTION_SHEET`.
+    """
+    if not source.has_velocity:
+        raise RimclError(f"{source.path} holds no velocity, which moving PIV tracers needs")
+    stored = np.asarray(source.times, dtype=np.float64)[frames]
+    spacing = float(np.min(np.diff(stored))) if len(stored) > 1 else 0.0
+    substeps = TRACKING_SUBSTEPS
+    if spacing > 0:
+        substeps = max(substeps, math.ceil(TRACKING_SUBSTEPS * (times[1] - times[0]) / spacing))
+    if getattr(source, "has_full_velocity", False):
+        positions = integrate_tracks(FlowVelocity(source, frames), start, times, substeps)
+        return positions, MOTION_3D
+    velocity = SheetVelocity.from_source(source, scene.x_sheet, times[0], times[1])
+    in_plane = integrate_tracks(velocity, start[:, 1:], times, substeps)
+    depth = np.broadcast_to(start[None, :, :1], (2, len(start), 1))
+    return np.concatenate([depth, in_plane], axis=-1), MOTION_SHEET
 
 
 @dataclasses.dataclass
@@ -601,15 +757,18 @@ class PivRender:
     config : dict
     case : str
     k_rho : float
+        NaN for a fluid case (``dT=…``) or a file of δn.
     delta_n_max : float
         Largest ``max δn - min δn`` of the two exposures' fields.
     dt : float
         Time between exposures (time units).
-    pixel_size : float
-        Length units per pixel.
+    motion : str
+        :data:`MOTION_3D` or :data:`MOTION_SHEET`.
     scene : rimcl.camera.Scene
-    camera : rimcl.camera.PlaneCamera or PupilCamera
+    camera : PlaneCamera, PupilCamera or LensCamera
     imaging : PivImaging
+    renderer : rimcl.render.Renderer
+        Pixel size, frame origin and point spread of the frames.
     device : pyopencl.Device
     """
 
@@ -620,10 +779,11 @@ class PivRender:
     k_rho: float
     delta_n_max: float
     dt: float
-    pixel_size: float
+    motion: str
     scene: Scene
     camera: object
     imaging: PivImaging
+    renderer: Renderer
     device: object
 
     @property
@@ -631,8 +791,15 @@ class PivRender:
         """The uniform-medium pair (from the reference)."""
         return self.reference.uniform
 
+    @property
+    def pixel_size(self):
+        """Length units per pixel."""
+        return self.renderer.pixel_size
+
 
 def _exposure_times(source, start_frame, dt):
+    """Times of exposures A and B, Δt, the stored frames spanning them, and B's stored
+    frame (None where B falls between stored frames)."""
     times = np.asarray(source.times, dtype=np.float64)
     if not 0 <= start_frame < len(times):
         raise RimclError(
@@ -657,33 +824,42 @@ def _exposure_times(source, start_frame, dt):
             f"{times[-1] - t_a:g} from frame {start_frame})"
         )
     last = int(np.searchsorted(times, t_b - slack, side="left"))
-    return t_a, min(t_b, float(times[-1])), dt, list(range(start_frame, max(last, start_frame) + 1))
+    stored_b = np.flatnonzero(np.abs(times - t_b) <= slack)
+    frame_b = int(stored_b[0]) if stored_b.size else None
+    t_b = min(t_b, float(times[-1]))
+    return t_a, t_b, dt, list(range(start_frame, max(last, start_frame) + 1)), frame_b
 
 
-def _piv_scene(source, imaging, x_sheet, depth):
-    """The scene; a clamped field's default sheet sits one seeding half-width inside it."""
+def _piv_scene(source, piv):
+    """The scene: as :meth:`Scene.from_grid`; the sheet of a field with only a sheet
+    velocity sits on that plane; a clamped field's default sheet moves one seeding
+    half-width inside it."""
+    sheet_plane = None if getattr(source, "has_full_velocity", False) else _sheet_plane(source)
+    x_sheet = piv.x_sheet if piv.x_sheet is not None else sheet_plane
     scene = Scene.from_grid(
-        source.origin, source.spacing, source.shape, source.boundary, x_sheet, depth
+        source.origin, source.spacing, source.shape, source.boundary, x_sheet, piv.depth
     )
-    if x_sheet is None and not scene.periodic:
-        half = SEED_HALF_WIDTH * imaging.thickness(scene)
+    if scene.periodic or sheet_plane is not None:
+        # tracers below a clamped grid see its edge values (the clamped boundary)
+        return scene
+    half = SEED_HALF_WIDTH * piv.imaging.thickness(scene)
+    low = float(source.origin[0])
+    if x_sheet is None:
         return Scene.from_grid(
-            source.origin,
-            source.spacing,
-            source.shape,
-            source.boundary,
-            scene.x_sheet + half,
-            depth,
+            source.origin, source.spacing, source.shape, source.boundary, low + half, piv.depth
         )
-    if not scene.periodic:
-        half = SEED_HALF_WIDTH * imaging.thickness(scene)
-        low = float(source.origin[0])
-        if scene.x_sheet - half < low:
-            raise RimclError(
-                f"the tracers around the sheet x1 = {scene.x_sheet:g} (± {half:g}) reach below "
-                f"the field (x1 >= {low:g}); move the sheet inside or make it thinner"
-            )
+    if scene.x_sheet - half < low:
+        raise RimclError(
+            f"the tracers around the sheet x1 = {scene.x_sheet:g} (± {half:g}) reach below "
+            f"the field (x1 >= {low:g}); move the sheet inside or make it thinner"
+        )
     return scene
+
+
+def _sheet_plane(source):
+    """The ``x1`` of a stored sheet velocity, or None."""
+    inner = getattr(source, "source", source)  # a CroppedSource reads its file's plane
+    return getattr(inner, "velocity_sheet_x1", None)
 
 
 def run_piv_render(
@@ -691,146 +867,114 @@ def run_piv_render(
     *,
     case=None,
     k_rho=None,
-    imaging=None,
-    window=32,
-    overlap=0.5,
-    camera="plane",
-    fan=8,
-    pupil_rays=64,
-    aperture_diameter=None,
-    focal_length=None,
-    f_number=None,
-    camera_distance=None,
-    view_angle=0.0,
-    start_frame=0,
-    dt=None,
-    x_sheet=None,
-    depth=None,
-    interp="trilinear",
-    precision="f32c",
-    step=None,
-    seed=0,
-    rays_per_batch=DEFAULT_RAYS_PER_BATCH,
+    piv=None,
+    camera=None,
+    integrator=None,
+    fluid=None,
+    run=None,
     reference=None,
-    device=None,
 ):
     """PIV frame pairs of one refractive-index case, through the field and a uniform medium.
 
     Parameters
     ----------
     field : str, Path or FieldFile, optional
-        A rimcl field file with velocity (default: the shipped sample).
+        A rimcl field file with velocity, full or on the sheet only (default: the
+        shipped sample, which stores the sheet velocity only).
     case, k_rho :
-        The Gladstone–Dale case (as :func:`rimcl.measure.run_render`).
-    imaging : PivImaging, optional
-    window, overlap :
-        The final interrogation windows (pixels, fraction) the truth is averaged over.
-    camera, fan, pupil_rays, aperture_diameter, focal_length, f_number, camera_distance,
-    view_angle :
-        The camera, as :func:`rimcl.measure.run_render` (fewer rays by default: a PIV
-        frame holds thousands of tracers).
-    start_frame : int
-        Stored frame of exposure A.
-    dt : float, optional
-        Time between exposures; default the time to the next stored frame. Exposure B's
-        field is interpolated in time between stored frames.
-    x_sheet, depth : float, optional
-        Sheet centre and traced depth (defaults: :meth:`Scene.from_grid`; for a clamped
-        field the sheet moves one seeding half-width inside the grid).
-    interp, precision, step :
-        Passed to :func:`rimcl.trace_rays` (``auto`` choices are not offered here).
-    seed : int
-        Seeds the tracers; the same seed gives the same tracers in every case.
-    rays_per_batch : int
+        The case: ``"C0"`` … ``"C4"``, ``"G=…"``, ``"dT=…"``/``"dS=…"`` (with ``fluid``),
+        or the Gladstone–Dale product ``k_rho`` (as :func:`rimcl.measure.run_render`).
+    piv : PivConfig, optional
+    camera : rimcl.config.CameraConfig, optional
+        Default :data:`PIV_CAMERA`. A lens camera sets the frame (its sensor, pixel size
+        and tracer image); ``imaging.pixels`` and ``imaging.diameter`` then do not apply.
+    integrator : rimcl.config.IntegratorConfig, optional
+        Interpolation, precision and step of :func:`rimcl.trace_rays` (not ``auto``).
+    fluid : rimcl.config.FluidConfig, optional
+        The fluid of ``dT=…``/``dS=…`` cases.
+    run : rimcl.config.RunConfig, optional
+        Device and rays per batch.
     reference : PivReference, optional
         From an earlier case with the same configuration: skips tracers, truth and the
         uniform-medium pair.
-    device : str or pyopencl.Device, optional
 
     Returns
     -------
     PivRender
     """
     from rimcl.device import describe_device, select_device
-    from rimcl.measure import (
-        _case_of,
-        _load_frame,
-        _make_camera,
-        _open_source,
-        _reference_step,
-        _uniform_like,
-    )
+    from rimcl.measure import case_of, open_source, reference_step, uniform_like
 
-    imaging = PivImaging() if imaging is None else imaging
-    if interp == "auto" or step in ("auto", "adaptive"):
-        raise RimclError("PIV frames take a fixed interpolation and step (not auto/adaptive)")
+    piv = PivConfig() if piv is None else piv
+    camera_config = PIV_CAMERA if camera is None else camera
+    integrator = IntegratorConfig() if integrator is None else integrator
+    run = RunConfig() if run is None else run
+    if integrator.interp == "auto":
+        raise RimclError("PIV frames take a fixed interpolation (not auto)")
+    imaging, settings = piv.imaging, piv.settings
     with ExitStack() as stack:
-        source, source_name = _open_source(field, stack)
-        case_name, g = _case_of(source, case, k_rho)
-        t_a, t_b, dt, frames = _exposure_times(source, int(start_frame), dt)
-        scene = _piv_scene(source, imaging, x_sheet, depth)
-        cam = _make_camera(
-            scene,
-            camera,
-            fan,
-            pupil_rays,
-            aperture_diameter,
-            focal_length,
-            f_number,
-            camera_distance,
-            view_angle,
+        source, source_name = open_source(field, stack)
+        if piv.box is not None:
+            source = CroppedSource(source, piv.box)
+        case_index = case_of(source, case, k_rho, FluidConfig() if fluid is None else fluid)
+        t_a, t_b, dt, frames, frame_b = _exposure_times(source, int(piv.start_frame), piv.dt)
+        scene = _piv_scene(source, piv)
+        cam = camera_config.build(scene)
+        device = select_device(run.device)
+        renderer = imaging.renderer(scene, cam)
+        grid = WindowGrid.for_image(
+            imaging.frame_shape(scene, cam), int(settings.window), float(settings.overlap)
         )
-        device = select_device(device)
-        renderer = imaging.renderer(scene)
-        grid = WindowGrid.for_image(imaging.frame_shape(scene), int(window), float(overlap))
-        thickness = imaging.thickness(scene)
         key = {
             "field": source_name,
+            "box": piv.describe()["box"],
             "times": [t_a, t_b],
             "scene": scene.describe(),
             "camera": cam.describe(),
-            "imaging": imaging.describe(scene),
-            "truth_windows": {"window": int(window), "overlap": float(overlap)},
-            "seed": int(seed),
+            "imaging": imaging.describe(scene, cam),
+            "truth_windows": {"window": int(settings.window), "overlap": float(settings.overlap)},
+            "seed": int(piv.seed),
             "trace": {
-                "interp": interp,
-                "precision": precision,
-                "step": None if step is None else float(step),
+                "interp": integrator.interp,
+                "precision": integrator.precision,
+                "step": None if integrator.step is None else float(integrator.step),
                 "device": describe_device(device),
             },
         }
-        options = {"interp": interp, "precision": precision, "device": device}
+        options = {"interp": integrator.interp, "precision": integrator.precision}
+        options["device"] = device
         if reference is None:
-            rng = np.random.default_rng(np.random.SeedSequence(int(seed)))
-            start = seed_particles(scene, imaging, rng)
-            motion = FlowVelocity(source, frames)
-            positions = integrate_tracks(motion, start, [t_a, t_b], TRACKING_SUBSTEPS)
-            weights = pair_weights(positions, scene.x_sheet, thickness)
-            uniform = _uniform_like(source)
+            rng = np.random.default_rng(np.random.SeedSequence(int(piv.seed)))
+            start = seed_particles(scene, imaging, rng, cam)
+            positions, motion = move_tracers(source, scene, start, (t_a, t_b), frames)
+            weights = pair_weights(positions, scene.x_sheet, imaging.thickness(scene, cam))
+            uniform = uniform_like(source)
             uniform_frames = image_pair(
                 (uniform, uniform),
                 positions,
                 scene,
                 cam,
                 imaging,
-                thickness,
-                {**options, "step": _reference_step(step, source)},
-                rays_per_batch,
+                {**options, "step": reference_step(integrator.step, source)},
+                run.rays_per_batch,
             )
             reference = PivReference(
-                key=key,
+                key={**key, "motion": motion},
                 positions=positions,
                 weights=weights,
                 truth=true_displacement(positions, renderer, grid, weights),
                 uniform=uniform_frames,
             )
-        elif reference.key != key:
+        elif {k: v for k, v in reference.key.items() if k != "motion"} != key:
             changed = sorted(k for k in key if reference.key.get(k) != key[k])
             raise RimclError(
                 "the PIV reference was made for another configuration (differs in: "
                 f"{', '.join(changed)})"
             )
-        fields = (_load_frame(source, frames[0], g), _field_at(source, t_b, g))
+        fields = (
+            case_index.field(source, int(piv.start_frame), t_a),
+            case_index.field(source, frame_b, t_b),
+        )
         delta_n_max = max(f.delta_n_range for f in fields)
         measured = image_pair(
             fields,
@@ -838,42 +982,35 @@ def run_piv_render(
             scene,
             cam,
             imaging,
-            thickness,
-            {**options, "step": step},
-            rays_per_batch,
+            {**options, "step": integrator.step},
+            run.rays_per_batch,
         )
     config = {
-        **key,
-        "case": case_name,
-        "k_rho": g,
+        **reference.key,
+        "case": case_index.name,
+        "k_rho": case_index.g,
         "dt": dt,
-        "start_frame": int(start_frame),
+        "start_frame": int(piv.start_frame),
         "velocity_frames": frames,
-        "tracking_substeps": TRACKING_SUBSTEPS,
         "n_tracers": int(reference.positions.shape[1]),
-        "rays_per_batch": int(rays_per_batch),
+        "rays_per_batch": int(run.rays_per_batch),
         "image_rows": "rows along x3 (row 0 lowest), columns along x2",
     }
     return PivRender(
         field=measured,
         reference=reference,
         config=config,
-        case=case_name,
-        k_rho=g,
+        case=case_index.name,
+        k_rho=case_index.g,
         delta_n_max=delta_n_max,
         dt=dt,
-        pixel_size=imaging.pixel_size(scene),
+        motion=reference.key["motion"],
         scene=scene,
         camera=cam,
         imaging=imaging,
+        renderer=renderer,
         device=device,
     )
-
-
-def _field_at(source, time, k_rho):
-    if math.isnan(k_rho):
-        return source.field_at(time)
-    return source.field_at(time, k_rho)
 
 
 def output_paths(prefix):
@@ -921,9 +1058,8 @@ def write_piv_render(prefix, result, overwrite=True):
         for index, frame in enumerate("AB"):
             write_tiff(paths[f"{medium}_{frame}"], pair.images[index], result.config, overwrite)
     reference = result.reference
-    renderer = result.imaging.renderer(result.scene)
-    pixels = renderer.to_pixels(reference.positions[..., 1:])
-    thickness = result.imaging.thickness(result.scene)
+    pixels = result.renderer.to_pixels(reference.positions[..., 1:])
+    thickness = result.imaging.thickness(result.scene, result.camera)
     with atomic_path(paths["truth"], overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
         h5.attrs["rimcl_schema"] = TRUTH_SCHEMA
         h5.attrs["schema_version"] = TRUTH_SCHEMA_VERSION
@@ -932,6 +1068,7 @@ def write_piv_render(prefix, result, overwrite=True):
         h5.attrs["delta_n_max"] = result.delta_n_max
         h5.attrs["dt"] = result.dt
         h5.attrs["pixel_size"] = result.pixel_size
+        h5.attrs["motion"] = result.motion
         h5.attrs["coordinates"] = (
             "positions x1, x2, x3 in field length units; col, row in pixels: pixel (row i, "
             "column j) covers x2 in fov_lo2 + [j, j+1) * pixel_size, x3 in fov_lo3 + [i, i+1) "

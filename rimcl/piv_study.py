@@ -31,9 +31,9 @@ import numpy as np
 
 from rimcl.errors import RimclError
 from rimcl.piv import PivSettings, WindowGrid, analyze_pair
-from rimcl.piv_images import run_piv_render, window_means
+from rimcl.piv_images import PivConfig, run_piv_render, window_means
 from rimcl.provenance import atomic_path, stamp_h5, to_json
-from rimcl.stats import _vector_errors
+from rimcl.stats import angle_deg, error_summary
 
 SCHEMA = "piv_case"
 SCHEMA_VERSION = 1
@@ -121,8 +121,7 @@ def optics_error(render, grid):
     """
     field, uniform = render.field.optics, render.uniform.optics
     error = ((field[1] - field[0]) - (uniform[1] - uniform[0])) / render.pixel_size
-    renderer = render.imaging.renderer(render.scene)
-    pixels = renderer.to_pixels(render.reference.positions[..., 1:])
+    pixels = render.renderer.to_pixels(render.reference.positions[..., 1:])
     middle = 0.5 * (pixels[0] + pixels[1])
     means, _ = window_means(grid, middle[:, 0], middle[:, 1], error, render.reference.weights)
     return means
@@ -199,6 +198,35 @@ def velocity_table(vectors, pixel_size, dt):
     return table
 
 
+def vector_errors(table, measured, reference):
+    """Relative-error summaries of the velocity: ``u2``, ``u3``, magnitude and angle.
+
+    The PIV counterpart of the PTV velocity block of :mod:`rimcl.stats` (same keys and
+    :func:`rimcl.stats.error_summary` shapes); each vector is one sample.
+
+    Parameters
+    ----------
+    table : dict of str to ndarray
+        :func:`velocity_table`.
+    measured, reference : str
+        Suffixes of the columns compared (``meas``, ``opt``, ``ref`` or ``true``); the
+        truth (denominator) is always the ``true`` column.
+
+    Returns
+    -------
+    dict
+        ``u2, u3, magnitude`` summaries and ``angle_deg_median``.
+    """
+    true, meas, ref = ((table[f"u2_{k}"], table[f"u3_{k}"]) for k in ("true", measured, reference))
+    angles = angle_deg(meas, ref)
+    return {
+        "u2": error_summary(meas[0] - ref[0], true[0]),
+        "u3": error_summary(meas[1] - ref[1], true[1]),
+        "magnitude": error_summary(np.hypot(*meas) - np.hypot(*ref), np.hypot(*true)),
+        "angle_deg_median": float(np.median(angles)) if angles.size else None,
+    }
+
+
 def _rms(values):
     values = np.asarray(values, dtype=np.float64)
     values = values[np.isfinite(values)]
@@ -217,8 +245,9 @@ def case_statistics(render, vectors, settings):
     Returns
     -------
     dict
-        ``name, G, delta_n_max, length_L, pixel_size_over_L, dt, n_tracers, n_vectors,
-        n_used, n_excluded`` (by reason), ``velocity`` (refraction error ``u' - u^ref``:
+        ``name, G, delta_n_max, length_L, pixel_size_over_L, dt, motion`` (the motion
+        model, :data:`rimcl.piv_images.MOTION_SHEET` or ``MOTION_3D``), ``n_tracers,
+        n_vectors, n_used, n_excluded`` (by reason), ``velocity`` (refraction error ``u' - u^ref``:
         ``u2, u3, magnitude`` error summaries and ``angle_deg_median``), ``optics`` (the
         optics part, same shape), ``baseline`` (``{"velocity": ...}``, ``u^ref - u``),
         ``displacement_px`` (rms and largest per-vector errors in pixels, by part),
@@ -246,6 +275,7 @@ def case_statistics(render, vectors, settings):
         "length_L": length,
         "pixel_size_over_L": render.pixel_size / length,
         "dt": render.dt,
+        "motion": render.motion,
         "n_tracers": int(render.reference.positions.shape[1]),
         "n_vectors": int(used.size),
         "n_used": int(np.count_nonzero(used)),
@@ -254,9 +284,9 @@ def case_statistics(render, vectors, settings):
             "outlier_uniform": int(np.count_nonzero(~vectors["valid_uniform"])),
             "no_tracers": int(np.count_nonzero(vectors["truth_tracers"] == 0)),
         },
-        "velocity": _vector_errors(table, "u", "meas", "ref"),
-        "optics": _vector_errors(table, "u", "opt", "ref"),
-        "baseline": {"velocity": _vector_errors(table, "u", "ref", "true")},
+        "velocity": vector_errors(table, "meas", "ref"),
+        "optics": vector_errors(table, "opt", "ref"),
+        "baseline": {"velocity": vector_errors(table, "ref", "true")},
         "displacement_px": {
             "truth_rms": _rms(truth),
             "refraction_rms": _rms(refraction),
@@ -274,7 +304,18 @@ def case_statistics(render, vectors, settings):
     }
 
 
-def run_piv_case(field=None, *, case=None, k_rho=None, settings=None, reference=None, **options):
+def run_piv_case(
+    field=None,
+    *,
+    case=None,
+    k_rho=None,
+    piv=None,
+    camera=None,
+    integrator=None,
+    fluid=None,
+    run=None,
+    reference=None,
+):
     """PIV errors of one refractive-index case (module docstring).
 
     Parameters
@@ -282,21 +323,21 @@ def run_piv_case(field=None, *, case=None, k_rho=None, settings=None, reference=
     field : str, Path or FieldFile, optional
         A rimcl field file with velocity (default: the shipped sample).
     case, k_rho :
-        The Gladstone–Dale case (``"C0"`` … ``"C4"``, or ``k_rho``; 0 is a uniform medium).
-    settings : rimcl.piv.PivSettings, optional
-        The correlation; its last window and overlap also set the truth's windows.
+        The case (``"C0"`` … ``"C4"``, ``"G=…"``, ``"dT=…"``, or ``k_rho``; 0 is a
+        uniform medium).
+    piv : rimcl.piv_images.PivConfig, optional
+        Imaging, timing and correlation (``piv.settings``).
+    camera, integrator, fluid, run : optional
+        The :mod:`rimcl.config` objects of :func:`rimcl.piv_images.run_piv_render`.
     reference : PivCaseReference, optional
         ``PivCase.reference`` of an earlier case of the same configuration.
-    **options
-        Passed to :func:`rimcl.piv_images.run_piv_render` (``imaging``, camera options,
-        ``start_frame``, ``dt``, ``x_sheet``, ``interp``, ``precision``, ``step``,
-        ``seed``, ``device``...).
 
     Returns
     -------
     PivCase
     """
-    settings = PivSettings() if settings is None else settings
+    piv = PivConfig() if piv is None else piv
+    settings = piv.settings
     if reference is not None and reference.settings != settings:
         raise RimclError("the PIV reference was made with other correlation settings")
     start = time.perf_counter()
@@ -304,10 +345,12 @@ def run_piv_case(field=None, *, case=None, k_rho=None, settings=None, reference=
         field,
         case=case,
         k_rho=k_rho,
-        window=settings.window,
-        overlap=settings.overlap,
+        piv=piv,
+        camera=camera,
+        integrator=integrator,
+        fluid=fluid,
+        run=run,
         reference=None if reference is None else reference.render,
-        **options,
     )
     middle = time.perf_counter()
     if reference is None:

@@ -1,5 +1,6 @@
 """PIV image pairs through a field (rimcl.piv_images), errors (rimcl.piv_study), figures."""
 
+import dataclasses
 import json
 
 import h5py
@@ -10,12 +11,16 @@ from click.testing import CliRunner
 
 from rimcl.camera import PupilCamera, Scene
 from rimcl.cli.main import cli
+from rimcl.config import CameraConfig, RunConfig
 from rimcl.errors import RimclError
 from rimcl.field import Field
 from rimcl.flow.fieldfile import write_field
-from rimcl.measure import _uniform_like
+from rimcl.measure import uniform_like
 from rimcl.piv import PivSettings, WindowGrid, analyze_pair
 from rimcl.piv_images import (
+    MOTION_3D,
+    MOTION_SHEET,
+    PivConfig,
     PivImaging,
     image_pair,
     run_piv_render,
@@ -25,7 +30,15 @@ from rimcl.piv_images import (
 )
 from rimcl.piv_study import load_piv_case, run_piv_case, write_piv_case
 
-SMALL = {"imaging": PivImaging(pixels=96), "camera": "pupil", "pupil_rays": 8}
+#: 96 px frames, 8 rays per tracer through a pupil, 16 px windows: a case in ~1 s
+SMALL_PIV = PivConfig(imaging=PivImaging(pixels=96), settings=PivSettings(window=16))
+PUPIL = CameraConfig(kind="pupil", pupil_rays=8)
+
+
+def small(device, **changes):
+    """Keyword arguments of run_piv_render / run_piv_case for a small run."""
+    piv = dataclasses.replace(SMALL_PIV, **changes)
+    return {"piv": piv, "camera": PUPIL, "run": RunConfig(device=device)}
 
 
 def test_sheet_profile_and_seeding_density():
@@ -88,7 +101,7 @@ def test_growing_transverse_gradient_matches_the_closed_form(device):
     fields = (_slab(g_a, n0, counts, lo, spacing), _slab(g_b, n0, counts, lo, spacing))
     options = {"device": device}
     through = image_pair(fields, positions, scene, camera, imaging, trace_options=options)
-    uniform = _uniform_like(fields[0])
+    uniform = uniform_like(fields[0])
     plain = image_pair((uniform, uniform), positions, scene, camera, imaging, trace_options=options)
     measured = analyze_pair(*through.images)
     reference = analyze_pair(*plain.images)
@@ -105,22 +118,26 @@ def test_growing_transverse_gradient_matches_the_closed_form(device):
     assert np.abs(reference.dx - 0.4).max() < 0.02 and np.abs(reference.dy - 0.25).max() < 0.02
 
 
-def _moving_box(path, velocity=(0.02, 0.3, -0.2)):
-    """A periodic box with a density wave and a uniform velocity (u1, u2, u3)."""
+def _moving_box(path, velocity=(0.02, 0.3, -0.2), sheet_only=False):
+    """A periodic box with a density wave and a uniform velocity (u1, u2, u3): in full, or
+    only (u2, u3) on the sheet x1 = 0."""
     count = 12
     h = 2 * np.pi / count
     x = np.arange(count) * h
     x3, x2, x1 = np.meshgrid(x, x, x, indexing="ij")
     density = [1 + 0.05 * np.sin(x1 + x2 + t) * np.cos(x3) for t in (0.0, 0.3, 0.6)]
     flow = np.broadcast_to(np.asarray(velocity, dtype=np.float32), (*x1.shape, 3))
+    motion = {"velocity": [flow] * 3}
+    if sheet_only:
+        motion = {"velocity_sheet": [flow[:, :, 0, 1:]] * 3, "sheet_x1": 0.0}
     write_field(
         path,
         density=density,
         times=(0.0, 0.05, 0.1),
         origin=(0, 0, 0),
         spacing=(h, h, h),
-        velocity=[flow] * 3,
         boundary="periodic",
+        **motion,
     )
     return str(path)
 
@@ -131,7 +148,8 @@ def box(tmp_path_factory):
 
 
 def test_uniform_flow_truth_and_out_of_plane_motion(box, device):
-    result = run_piv_render(box, case="C2", dt=0.1, device=device, **SMALL)
+    result = run_piv_render(box, case="C2", **small(device))
+    assert result.motion == MOTION_3D and result.dt == 0.1
     positions = result.reference.positions
     moved = positions[1] - positions[0]
     np.testing.assert_allclose(moved, np.tile([0.002, 0.03, -0.02], (len(moved), 1)), atol=1e-12)
@@ -143,15 +161,34 @@ def test_uniform_flow_truth_and_out_of_plane_motion(box, device):
     assert result.field.ray_counts["ok"] == 2 * len(positions[0]) * 8
 
 
+def test_sheet_velocity_moves_tracers_in_plane_only(tmp_path, device):
+    # a file with the sheet velocity only: every tracer keeps its depth and moves with the
+    # sheet's (u2, u3), whatever its x1; the out-of-plane u1 is not there to use
+    box = _moving_box(tmp_path / "sheet.h5", sheet_only=True)
+    result = run_piv_render(box, case="C2", **small(device))
+    assert result.motion == MOTION_SHEET
+    positions = result.reference.positions
+    np.testing.assert_array_equal(positions[1, :, 0], positions[0, :, 0])
+    assert np.ptp(positions[0, :, 0]) > 0.5 * result.imaging.thickness(result.scene)
+    moved = positions[1, :, 1:] - positions[0, :, 1:]
+    np.testing.assert_allclose(moved, np.tile([0.03, -0.02], (len(moved), 1)), atol=1e-9)
+    prefix = tmp_path / "sheet"
+    from rimcl.piv_images import write_piv_render
+
+    write_piv_render(prefix, result)
+    with h5py.File(tmp_path / "sheet_truth.h5") as h5:
+        assert "NOT modelled" in h5.attrs["motion"]
+    # a sheet elsewhere than the stored plane has no velocity to move its tracers
+    with pytest.raises(RimclError, match="stores the sheet velocity only on x1 = 0"):
+        run_piv_render(box, case="C2", **small(device, x_sheet=1.0))
+
+
 def test_zero_k_rho_gives_exactly_zero_refraction_error(device):
-    first = run_piv_case(case="C3", device=device, settings=PivSettings(window=16), **SMALL)
-    zero = run_piv_case(
-        k_rho=0.0,
-        device=device,
-        settings=PivSettings(window=16),
-        reference=first.reference,
-        **SMALL,
-    )
+    first = run_piv_case(case="C3", **small(device))
+    zero = run_piv_case(k_rho=0.0, reference=first.reference, **small(device))
+    # the shipped sample stores the sheet velocity only, 0.02 apart; dt = 0.1 spans 5
+    assert first.render.motion == MOTION_SHEET
+    assert first.render.config["velocity_frames"] == [0, 1, 2, 3, 4, 5]
     vectors = zero.vectors
     assert np.array_equal(zero.render.field.images, zero.render.uniform.images)
     assert np.all(vectors["dx_field"] - vectors["dx_uniform"] == 0)
@@ -161,25 +198,35 @@ def test_zero_k_rho_gives_exactly_zero_refraction_error(device):
     assert zero.stats["velocity"]["u3"]["rms_normalized"] == 0.0
     # the case that bends light does move the vectors
     assert first.stats["displacement_px"]["refraction_rms"] > 0
-    assert set(first.stats["velocity"]["u2"]) == {
-        "systematic",
-        "random",
-        "median",
-        "iqr",
-        "rms_normalized",
-        "n",
-    }
+    assert {"systematic", "random", "median", "iqr", "rms_normalized", "n"} <= set(
+        first.stats["velocity"]["u2"]
+    )
 
 
 def test_reference_must_match(box, device):
-    first = run_piv_render(box, case="C1", device=device, **SMALL)
+    first = run_piv_render(box, case="C1", **small(device))
     with pytest.raises(RimclError, match="differs in: seed"):
-        run_piv_render(box, case="C2", seed=5, reference=first.reference, device=device, **SMALL)
+        run_piv_render(box, case="C2", reference=first.reference, **small(device, seed=5))
 
 
 def test_exposure_beyond_the_stored_frames_is_refused(box):
     with pytest.raises(RimclError, match="beyond the last stored frame"):
-        run_piv_render(box, case="C1", start_frame=1, dt=0.2, **SMALL)
+        run_piv_render(box, case="C1", **small(None, start_frame=1, dt=0.2))
+
+
+def test_lens_camera_sets_the_frame(box, device):
+    lens = CameraConfig(
+        kind="lens", length_m=0.01, magnification=0.5, sensor_pixels=(80, 64), pupil_rays=8
+    )
+    result = run_piv_render(
+        box, case="C1", piv=SMALL_PIV, camera=lens, run=RunConfig(device=device)
+    )
+    camera = result.camera
+    assert result.pixel_size == camera.pixel_size
+    assert result.field.images.shape == (2, 64, 80)
+    assert result.renderer.psf_sigma == camera.psf_sigma_px
+    # uniform flow: the truth is the motion in this lens's pixels
+    assert np.allclose(result.reference.truth["dx"], 0.03 / camera.pixel_size)
 
 
 def test_cli_render_writes_frames_and_truth(box, device, tmp_path):
@@ -200,7 +247,7 @@ def test_cli_render_writes_frames_and_truth(box, device, tmp_path):
 
 
 def test_case_file_round_trip(box, device, tmp_path):
-    case = run_piv_case(box, case="C4", device=device, settings=PivSettings(window=16), **SMALL)
+    case = run_piv_case(box, case="C4", **small(device))
     path = tmp_path / "case.h5"
     write_piv_case(path, case)
     vectors, stats = load_piv_case(path)
@@ -211,11 +258,8 @@ def test_case_file_round_trip(box, device, tmp_path):
 def test_figures_of_two_cases(box, device, tmp_path):
     from rimcl.piv_figures import FIGURE_NAMES, write_piv_figures
 
-    settings = PivSettings(window=16)
-    strong = run_piv_case(box, case="C4", device=device, settings=settings, **SMALL)
-    zero = run_piv_case(
-        box, k_rho=0.0, device=device, settings=settings, reference=strong.reference, **SMALL
-    )
+    strong = run_piv_case(box, case="C4", **small(device))
+    zero = run_piv_case(box, k_rho=0.0, reference=strong.reference, **small(device))
     cases = [(strong.vectors, strong.stats), (zero.vectors, zero.stats)]
     written = write_piv_figures(cases, tmp_path, config={"test": True})
     assert len(written) == 3 * len(FIGURE_NAMES)
