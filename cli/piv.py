@@ -25,6 +25,24 @@ overlap_option = click.option(
 )
 
 
+def _number(value):
+    return "n/a" if value is None else f"{value:.3g}"
+
+
+def echo_piv_case_lines(stats):
+    """One line per case of a study's PIV results: vectors used, errors in pixels and u3."""
+    for case in stats["cases"]:
+        if "piv" not in case:
+            continue
+        piv = case["piv"]
+        pixels, u3 = piv["displacement_px"], piv["velocity"]["u3"]
+        click.echo(
+            f"{'PIV ' + case['name']:>8}  G = {piv['G']:.3g}: {piv['n_used']}/{piv['n_vectors']} "
+            f"vectors, refraction {_number(pixels['refraction_rms'])} px rms (truth "
+            f"{_number(pixels['truth_rms'])} px), u3 rms(ε)/rms(u) {_number(u3['rms_normalized'])}"
+        )
+
+
 @click.group()
 def piv():
     """PIV: cross-correlation of image pairs, and image pairs rendered through a field."""

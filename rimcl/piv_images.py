@@ -71,7 +71,7 @@ from rimcl.errors import RimclError
 from rimcl.flow.crop import CroppedSource
 from rimcl.piv import PivSettings, WindowGrid, write_tiff
 from rimcl.provenance import atomic_path, check_output, stamp_h5
-from rimcl.render import Renderer, quantize
+from rimcl.render import TRUNCATE_SIGMAS, Renderer, quantize
 from rimcl.trace import STATUS_NAMES, trace_rays
 from rimcl.track import SheetVelocity, integrate_tracks
 
@@ -81,6 +81,7 @@ TRUTH_SCHEMA_VERSION = 1
 #: sheet intensity falls to exp(-8) = 3e-4: beyond, a tracer adds less than a count.
 SEED_HALF_WIDTH = 1.0
 MEDIA = ("field", "uniform")
+DEPOSIT_CHUNK = 1 << 15  # rays deposited at once: a few tens of MB of pixel stamps
 
 
 def sheet_intensity(x1, x_sheet, thickness):
@@ -124,8 +125,6 @@ class PivImaging:
         Peak of an isolated in-focus tracer image, fraction of full scale, in (0, 1].
     band : float
         Width of the band around the field of view also seeded with tracers (pixels).
-    max_window : int
-        Largest per-tracer render window (pixels); rays beyond it are lost and counted.
     """
 
     pixels: int = 512
@@ -135,7 +134,6 @@ class PivImaging:
     bit_depth: int = 16
     peak_fraction: float = 0.5
     band: float = 16.0
-    max_window: int = 512
 
     def __post_init__(self):
         if int(self.pixels) != self.pixels or self.pixels < 16:
@@ -192,12 +190,13 @@ class PivImaging:
             psf_sigma = camera.psf_sigma_px
         else:
             origin, psf_sigma = scene.fov_lo, self.psf_sigma
+        # the frame is the only window: every ray lands in it or off the sensor
         return Renderer(
             "exact",
             self.pixel_size(scene, camera),
             tuple(float(v) for v in origin),
             float(psf_sigma),
-            int(self.max_window),
+            max(self.frame_shape(scene, camera)) + 2 * int(TRUNCATE_SIGMAS * psf_sigma + 2),
             int(self.bit_depth),
         )
 
@@ -220,9 +219,8 @@ class PivImaging:
             "bit_depth": int(self.bit_depth),
             "peak_fraction": float(self.peak_fraction),
             "band_px": float(self.band),
-            "max_window_px": int(self.max_window),
             "seed_half_width_thicknesses": SEED_HALF_WIDTH,
-            "renderer": "exact (pixel-integrated Gaussian per ray)",
+            "renderer": "exact: pixel-integrated Gaussian per ray, cut at the renderer's pad",
         }
         if scene is not None:
             record.update(
@@ -281,7 +279,7 @@ class PivFrames:
         Collected rays per exposure and tracer.
     ray_counts : dict of str to int
         Trace status counts of all rays of both exposures, plus ``vignetted`` and
-        ``outside_window`` (collected rays lost beyond the render window).
+        ``off_frame`` (collected rays imaged outside the frame, their light lost).
     saturated_pixels : list of int
         Pixels clipped at full scale, per exposure.
     seconds : dict of str to float
@@ -296,15 +294,46 @@ class PivFrames:
     seconds: dict
 
 
-def _add_window(frame, window, image):
-    """Add a window image into a frame, dropping what falls outside the frame."""
-    rows, cols = frame.shape
-    r0, r1 = max(window.row0, 0), min(window.row0 + window.height, rows)
-    c0, c1 = max(window.col0, 0), min(window.col0 + window.width, cols)
-    if r0 < r1 and c0 < c1:
-        frame[r0:r1, c0:c1] += image[
-            r0 - window.row0 : r1 - window.row0, c0 - window.col0 : c1 - window.col0
-        ]
+def deposit_rays(light, pixels, weights, renderer):
+    """Add the image of rays to a full frame, each a pixel-integrated Gaussian.
+
+    Each ray adds ``weight · ∫∫ G_σ`` over every pixel within ``renderer.pad`` pixels of
+    its own pixel: for a single ray exactly what :meth:`rimcl.render.Renderer.render`
+    gives in :meth:`~rimcl.render.Renderer.window_for` its point. Unlike a window per
+    tracer, the cost does not grow with how far refraction spreads a tracer's rays.
+
+    Parameters
+    ----------
+    light : ndarray, float64, shape (rows, columns)
+        The frame; added to in place. Light beyond its edges is lost.
+    pixels : ndarray, shape (K, 2)
+        Finite image points in pixel coordinates (column, row).
+    weights : ndarray, shape (K,)
+        Light per ray.
+    renderer : rimcl.render.Renderer
+        Its ``psf_sigma`` and ``pad``.
+
+    Returns
+    -------
+    int
+        Rays whose own pixel lies outside the frame.
+    """
+    rows, cols = light.shape
+    offsets = np.arange(-renderer.pad, renderer.pad + 1)
+    for first in range(0, len(pixels), DEPOSIT_CHUNK):
+        points = pixels[first : first + DEPOSIT_CHUNK]
+        cells = np.floor(points).astype(np.int64)[:, :, None] + offsets  # (K, 2, S)
+        centred = cells - points[:, :, None]
+        share = ndtr((centred + 1) / renderer.psf_sigma) - ndtr(centred / renderer.psf_sigma)
+        light_of = weights[first : first + DEPOSIT_CHUNK, None, None]
+        stamps = (share[:, 1, :, None] * light_of) * share[:, 0, None, :]  # (K, S, S)
+        row_of = np.broadcast_to(cells[:, 1, :, None], stamps.shape)
+        col_of = np.broadcast_to(cells[:, 0, None, :], stamps.shape)
+        inside = (row_of >= 0) & (row_of < rows) & (col_of >= 0) & (col_of < cols)
+        flat = row_of[inside] * cols + col_of[inside]
+        light += np.bincount(flat, weights=stamps[inside], minlength=light.size).reshape(rows, cols)
+    own = np.floor(pixels).astype(np.int64)
+    return int(np.count_nonzero(np.any((own < 0) | (own >= [cols, rows]), axis=1)))
 
 
 def _rays_of(camera, positions):
@@ -355,21 +384,20 @@ def _expose(field, positions, intensity, camera, scene, renderer, shape, options
             points = camera.image_points(result.end_pos, result.end_dir)
         else:
             points = result.image_pos[:, 1:]
-        points = points.reshape(len(ids), rays, 2)
-        collected = collected.reshape(len(ids), rays)
-        for k, tracer in enumerate(ids):
-            kept = points[k][collected[k]]
-            collected_count[tracer] = len(kept)
-            if len(kept) == 0:
-                continue
-            # every ray of a tracer carries the same light, so the light-weighted mean
-            # image point is the plain mean
-            optics[tracer] = kept.mean(axis=0)
-            pixels = renderer.to_pixels(kept)
-            window = renderer.window_for(pixels)
-            image, outside = renderer.render(pixels, np.full(len(kept), intensity[tracer]), window)
-            totals["outside_window"] += outside
-            _add_window(light, window, image)
+        lit = collected.reshape(len(ids), rays)
+        counts = lit.sum(axis=1)
+        collected_count[ids] = counts
+        # every ray of a tracer carries the same light, so the light-weighted mean image
+        # point is the plain mean of its collected rays
+        sums = np.where(lit[..., None], points.reshape(len(ids), rays, 2), 0.0).sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            optics[ids] = np.where(counts[:, None] > 0, sums / counts[:, None], np.nan)
+        totals["off_frame"] += deposit_rays(
+            light,
+            renderer.to_pixels(points[collected]),
+            np.repeat(intensity[ids], rays)[collected],
+            renderer,
+        )
         totals["seconds"]["trace"] += middle - start
         totals["seconds"]["render"] += time.perf_counter() - middle
     return light, optics, collected_count
@@ -415,7 +443,7 @@ def image_pair(
     totals = {
         "status": np.zeros(len(STATUS_NAMES), dtype=np.int64),
         "vignetted": 0,
-        "outside_window": 0,
+        "off_frame": 0,
         "seconds": {"trace": 0.0, "render": 0.0},
     }
     scale = imaging.scale(camera.rays_per_tracer, renderer.psf_sigma)
@@ -440,7 +468,7 @@ def image_pair(
         optics.append(mean_points)
         collected.append(count)
     ray_counts = {name: int(c) for name, c in zip(STATUS_NAMES, totals["status"], strict=True)}
-    ray_counts.update(vignetted=totals["vignetted"], outside_window=totals["outside_window"])
+    ray_counts.update(vignetted=totals["vignetted"], off_frame=totals["off_frame"])
     return PivFrames(
         images=np.stack(images),
         optics=np.stack(optics),

@@ -25,18 +25,25 @@ import dataclasses
 import json
 import math
 import time
+from pathlib import Path
 
 import h5py
 import numpy as np
 
 from rimcl.errors import RimclError
 from rimcl.piv import PivSettings, WindowGrid, analyze_pair
-from rimcl.piv_images import PivConfig, run_piv_render, window_means
+from rimcl.piv_images import PivConfig, PivImaging, run_piv_render, window_means
 from rimcl.provenance import atomic_path, stamp_h5, to_json
 from rimcl.stats import angle_deg, error_summary
 
 SCHEMA = "piv_case"
 SCHEMA_VERSION = 1
+#: Attribute of a study's PIV case file holding the scene it was made for (JSON).
+STUDY_RECORD = "study_scene"
+#: Folder of the PIV case files in a study directory.
+STUDY_FOLDER = "piv"
+#: PIV and PTV errors "agree" when their ratio lies within this factor either way.
+AGREEMENT_FACTOR = 2.0
 #: Per-vector arrays of a case (all of shape (rows, columns) of the final PIV grid).
 VECTOR_COLUMNS = (
     "x",
@@ -374,12 +381,12 @@ def run_piv_case(
     )
 
 
-def write_piv_case(path, case, overwrite=True):
+def write_piv_case(path, case, overwrite=True, record=None):
     """Write one case's per-vector table and statistics to HDF5 (``rimcl_schema = "piv_case"``).
 
     Datasets: :data:`VECTOR_COLUMNS` (pixels; ``x`` along ``x2``, ``y`` along ``x3``). Root
-    attributes: ``case``, ``k_rho``, ``dt``, ``pixel_size``, ``stats`` (JSON), ``config``,
-    ``versions``.
+    attributes: ``case``, ``k_rho``, ``dt``, ``pixel_size``, ``motion``, ``stats`` (JSON),
+    ``config``, ``versions``, and with ``record`` (a study's scene) ``study_scene`` (JSON).
     """
     with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
         h5.attrs["rimcl_schema"] = SCHEMA
@@ -388,7 +395,10 @@ def write_piv_case(path, case, overwrite=True):
         h5.attrs["k_rho"] = case.render.k_rho
         h5.attrs["dt"] = case.render.dt
         h5.attrs["pixel_size"] = case.render.pixel_size
+        h5.attrs["motion"] = case.render.motion
         h5.attrs["stats"] = to_json(case.stats)
+        if record is not None:
+            h5.attrs[STUDY_RECORD] = to_json(record)
         for name in VECTOR_COLUMNS:
             h5.create_dataset(name, data=case.vectors[name])
         stamp_h5(h5, case.render.config, case.render.device)
@@ -445,3 +455,266 @@ def agreement_with_ptv(piv_stats, ptv_stats):
             "ratio_rms_normalized": ratio,
         }
     return result
+
+
+def configs_from_scene(scene):
+    """The PIV measurement of a study scene (``[piv]`` and the shared sections).
+
+    The field, box, sheet, start frame, camera kind and optics, integrator, fluid, device
+    and tracer seed are the scene's (those of the PTV cases); the camera aims
+    ``piv.rays`` rays per tracer (a plane camera a fan of ``round(√rays)²``).
+
+    Parameters
+    ----------
+    scene : dict
+        A complete scene (:func:`rimcl.scene.load_scene`).
+
+    Returns
+    -------
+    piv : rimcl.piv_images.PivConfig
+    configs : dict
+        ``camera``, ``integrator``, ``fluid``, ``run`` for :func:`run_piv_case`.
+    """
+    from rimcl.config import MeasureConfig
+
+    shared = MeasureConfig.from_scene(scene, scene["cases"]["names"][0])
+    section = scene["piv"]
+    rays = int(section["rays"])
+    piv = PivConfig(
+        imaging=PivImaging(
+            pixels=section["pixels"],
+            density=section["density"],
+            diameter=section["diameter"],
+            sheet_thickness=section["sheet_thickness"],
+            bit_depth=section["bit_depth"],
+        ),
+        settings=PivSettings(
+            window=section["window"], overlap=section["overlap"], passes=section["passes"]
+        ),
+        dt=section["dt"],
+        start_frame=shared.time.start_frame,
+        box=shared.box,
+        x_sheet=shared.x_sheet,
+        depth=shared.depth,
+        seed=shared.tracers.seed,
+    )
+    camera = dataclasses.replace(shared.camera, fan=max(1, round(math.sqrt(rays))), pupil_rays=rays)
+    configs = {
+        "camera": camera,
+        "integrator": shared.integrator,
+        "fluid": shared.fluid,
+        "run": shared.run,
+    }
+    return piv, configs
+
+
+def study_case_path(out_dir, case):
+    """PIV case file of one case in a study directory: ``DIR/piv/<case>.h5``."""
+    return Path(out_dir) / STUDY_FOLDER / f"{case}.h5"
+
+
+def is_current(path, record):
+    """Whether a study's PIV case file is complete and was made for the scene ``record``."""
+    try:
+        with h5py.File(path, "r") as h5:
+            complete = h5.attrs.get("rimcl_schema") == SCHEMA and "stats" in h5.attrs
+            complete = complete and all(name in h5 for name in VECTOR_COLUMNS)
+            recorded = h5.attrs.get(STUDY_RECORD)
+            return (
+                complete
+                and recorded is not None
+                and json.loads(recorded) == json.loads(to_json(record))
+            )
+    except (OSError, ValueError):
+        return False
+
+
+def run_study_cases(scene, out_dir, record, *, force=False, report=None):
+    """The PIV case files of a study: one per case, atomic and resumable.
+
+    A case whose file :func:`is_current` is kept (unless ``force``); the others are
+    measured, all on the tracers, truth and uniform-medium vectors of the first one
+    measured.
+
+    Parameters
+    ----------
+    scene : dict
+        A complete scene.
+    out_dir : str or Path
+        The study directory; files go to ``DIR/piv/<case>.h5``.
+    record : dict
+        What identifies the scene (stored in each file, compared on resume).
+    force : bool
+        Measure every case again.
+    report : callable, optional
+        Called with one line of text per step.
+
+    Returns
+    -------
+    paths : list of Path
+        One per case, in the scene's order.
+    ran : list of str
+        Cases measured in this call.
+    """
+    say = report or (lambda line: None)
+    names = scene["cases"]["names"]
+    piv, configs = configs_from_scene(scene)
+    folder = Path(out_dir) / STUDY_FOLDER
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RimclError(f"cannot create {folder}: {exc.strerror}") from None
+    paths, ran, reference = [], [], None
+    for index, name in enumerate(names, start=1):
+        path = study_case_path(out_dir, name)
+        paths.append(path)
+        if not force and is_current(path, record):
+            say(f"[PIV {index}/{len(names)}] {name}: finished earlier, kept ({path})")
+            continue
+        say(f"[PIV {index}/{len(names)}] {name}: imaging and correlating")
+        start = time.perf_counter()
+        case = run_piv_case(
+            scene["field"]["path"] or None, case=name, piv=piv, reference=reference, **configs
+        )
+        reference = case.reference
+        write_piv_case(path, case, overwrite=True, record=record)
+        ran.append(name)
+        say(f"[PIV {index}/{len(names)}] {name}: done in {time.perf_counter() - start:.1f} s")
+    return paths, ran
+
+
+def add_study_results(stats, paths, figures_dir=None, config=None):
+    """Put the PIV results of a study's case files into its ``stats.json`` document.
+
+    Each case entry gains ``piv`` (:func:`case_statistics`) and, where the PTV case ran,
+    ``piv_vs_ptv`` (:func:`agreement_with_ptv`); a case without a PTV entry (``mode =
+    "piv"``) gets one with ``name``, ``G``, ``delta_n_max`` and ``piv``.
+
+    Parameters
+    ----------
+    stats : dict
+        The ``stats.json`` document (``cases`` may be empty); changed in place.
+    paths : list of Path
+        PIV case files (:func:`write_piv_case`).
+    figures_dir : Path, optional
+        Where to draw the PIV figures (:func:`rimcl.piv_figures.write_piv_figures`).
+    config : dict, optional
+        Recorded in each figure's JSON.
+
+    Returns
+    -------
+    dict
+        ``stats``.
+    """
+    cases = [load_piv_case(path) for path in paths]
+    entries = {entry["name"]: entry for entry in stats["cases"]}
+    for _, piv_stats in cases:
+        entry = entries.get(piv_stats["name"])
+        if entry is None:
+            entry = {key: piv_stats[key] for key in ("name", "G", "delta_n_max")}
+            stats["cases"].append(entry)
+        entry["piv"] = piv_stats
+        if "velocity" in entry:
+            entry["piv_vs_ptv"] = agreement_with_ptv(piv_stats, entry)
+    if figures_dir is not None:
+        from rimcl.piv_figures import write_piv_figures
+
+        write_piv_figures(cases, figures_dir, config=config, overwrite=True)
+    return stats
+
+
+def _percent(value):
+    return "n/a" if value is None else f"{100 * value:.3g} %"
+
+
+def _number(value):
+    return "n/a" if value is None else f"{value:.3g}"
+
+
+def verdict(stats):
+    """One line: do PIV and PTV refraction errors of ``|u|`` agree, case by case?
+
+    They agree in a case when ``rms(ε_‖u‖)/rms(‖u‖)`` of PIV over that of PTV lies within
+    :data:`AGREEMENT_FACTOR` either way.
+    """
+    agree, differ = [], []
+    for case in stats["cases"]:
+        ratio = case.get("piv_vs_ptv", {}).get("magnitude", {}).get("ratio_rms_normalized")
+        if ratio is None:
+            continue
+        within = 1 / AGREEMENT_FACTOR <= ratio <= AGREEMENT_FACTOR
+        (agree if within else differ).append(f"{case['name']} ({ratio:.2g})")
+    if not agree and not differ:
+        return 'No PTV case to compare with (run.mode = "piv").'
+    factor = f"{AGREEMENT_FACTOR:g}"
+    if not differ:
+        return (
+            f"**Verdict: PIV and PTV agree** within a factor {factor} in every case "
+            f"(PIV/PTV of rms(ε_‖u‖)/rms(‖u‖)): {', '.join(agree)}."
+        )
+    if not agree:
+        return (
+            f"**Verdict: PIV and PTV differ** by more than a factor {factor}: {', '.join(differ)}."
+        )
+    return (
+        f"**Verdict: PIV and PTV agree** within a factor {factor} in {', '.join(agree)}, "
+        f"and **differ** in {', '.join(differ)} (PIV/PTV of rms(ε_‖u‖)/rms(‖u‖))."
+    )
+
+
+def summary_lines(stats):
+    """The PIV section of a study's ``summary.md`` (empty without PIV results).
+
+    Returns
+    -------
+    list of str
+        Markdown lines: what was measured, the per-case table beside PTV, the verdict.
+    """
+    cases = [case for case in stats["cases"] if "piv" in case]
+    if not cases:
+        return []
+    first = cases[0]["piv"]
+    settings = first["piv"]
+    lines = [
+        "",
+        "## PIV beside PTV",
+        "",
+        f"PIV frames of {first['n_tracers']} tracers across a Gaussian light sheet "
+        f"(pixel = {first['pixel_size_over_L']:.3g} L), Δt = {first['dt']:.3g}, "
+        f"{settings['passes']} passes down to {settings['window']} px windows "
+        f"(overlap {settings['overlap']:g}); cases in `piv/<case>.h5`, figures "
+        "`figures/piv_*`. Motion: " + first["motion"] + ".",
+        "",
+        "Refraction error of a vector: measured through the field minus measured through "
+        "a uniform medium on the same tracers (pixels, rms over the vectors used); *optics*: "
+        "the window average of the rays' image-point shifts; *baseline*: the uniform-medium "
+        "vector minus the window-averaged truth (the PIV method's own error). Relative "
+        "errors of `u3` as for PTV; `‖u‖` columns compare PIV and PTV (`stats.json`: "
+        "`piv`, `piv_vs_ptv` per case).",
+        "",
+        "| case | G | vectors used | truth rms (px) | refraction rms (px) | optics rms (px) "
+        "| baseline rms (px) | u3 systematic | u3 random | PIV rms(ε_‖u‖)/rms(‖u‖) "
+        "| PTV rms(ε_‖u‖)/rms(‖u‖) | PIV/PTV |",
+        "|" + "---|" * 12,
+    ]
+    for case in cases:
+        piv = case["piv"]
+        pixels = piv["displacement_px"]
+        compared = case.get("piv_vs_ptv", {}).get("magnitude", {})
+        row = [
+            case["name"],
+            _number(piv["G"]),
+            f"{piv['n_used']}/{piv['n_vectors']}",
+            _number(pixels["truth_rms"]),
+            _number(pixels["refraction_rms"]),
+            _number(pixels["optics_rms"]),
+            _number(pixels["baseline_rms"]),
+            _percent(piv["velocity"]["u3"]["systematic"]),
+            _percent(piv["velocity"]["u3"]["random"]),
+            _percent(piv["velocity"]["magnitude"]["rms_normalized"]),
+            _percent(compared.get("ptv_rms_normalized")),
+            _number(compared.get("ratio_rms_normalized")),
+        ]
+        lines.append("| " + " | ".join(row) + " |")
+    lines += ["", verdict(stats), ""]
+    return lines

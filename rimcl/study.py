@@ -6,8 +6,10 @@ A study directory holds:
   refused unless ``force``);
 - ``cases/<case>.h5``: one ``rimcl render`` file per case, written atomically when the
   case is finished; a rerun skips the cases whose file exists;
+- ``piv/<case>.h5`` with ``run.mode = "piv"`` or ``"both"``: the PIV errors of each case
+  (:mod:`rimcl.piv_study`), kept on a rerun when complete and of the same scene;
 - ``stats.json`` and ``figures/``: statistics and figures of all cases (:mod:`rimcl.stats`,
-  :mod:`rimcl.figures`);
+  :mod:`rimcl.figures`; PIV: a ``piv`` entry per case and ``figures/piv_*``);
 - ``summary.md``: the paper-style table, beside the paper's values for air and water.
   Written last, so its presence (newer than every case file) means the study is complete
   and a rerun only reads ``stats.json``.
@@ -30,7 +32,7 @@ from rimcl.provenance import atomic_path
 from rimcl.scene import load_scene, scene_text
 
 #: Scene keys that do not change the measurement: a study may resume with other values.
-RUN_ONLY_KEYS = (("run", "device"), ("run", "rays_per_batch"))
+RUN_ONLY_KEYS = (("run", "device"), ("run", "rays_per_batch"), ("run", "mode"))
 
 PAPER_SOURCE = (
     "H. Li, A. Fischer, M. Avila, D. Xu, *Measurement error of tracer-based velocimetry in "
@@ -145,13 +147,17 @@ def case_path(out_dir, case):
     return Path(out_dir) / "cases" / f"{case}.h5"
 
 
-def _up_to_date(out_dir, case_files, figures):
+def _up_to_date(out_dir, case_files, figures, mode="ptv"):
     from rimcl.figures import FIGURE_NAMES
+    from rimcl.piv_figures import FIGURE_NAMES as PIV_FIGURE_NAMES
 
     summary, stats = out_dir / "summary.md", out_dir / "stats.json"
     needed = [summary, stats]
+    names = {"ptv": FIGURE_NAMES, "piv": PIV_FIGURE_NAMES}.get(
+        mode, FIGURE_NAMES + PIV_FIGURE_NAMES
+    )
     if figures:
-        needed += [out_dir / "figures" / f"{name}.png" for name in FIGURE_NAMES]
+        needed += [out_dir / "figures" / f"{name}.png" for name in names]
     if not all(path.exists() for path in needed):
         return False
     inputs = [out_dir / "scene.toml", *case_files]
@@ -195,7 +201,8 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
     scene_path, text = out_dir / "scene.toml", scene_text(scene)
     if not scene_path.exists() or scene_path.read_text() != text:
         _write_text(scene_path, text)
-    names = scene["cases"]["names"]
+    mode = scene["run"]["mode"]
+    names = scene["cases"]["names"] if mode != "piv" else []
     ran, skipped, seconds = [], [], {}
     references = {}  # threshold -> reference images (they depend on it, not on the case)
     for index, name in enumerate(names, start=1):
@@ -220,20 +227,26 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
         seconds[name] = time.perf_counter() - case_start
         ran.append(name)
         say(f"[{index}/{len(names)}] {name}: done in {seconds[name]:.1f} s")
+    piv_files = []
+    if mode != "ptv":
+        from rimcl.piv_study import run_study_cases
+
+        piv_files, _ = run_study_cases(scene, out_dir, _comparable(scene), force=force, report=say)
     case_files = [case_path(out_dir, name) for name in names]
-    if not force and not ran and _up_to_date(out_dir, case_files, figures):
+    if not force and not ran and _up_to_date(out_dir, case_files + piv_files, figures, mode):
         say("statistics, figures and summary are up to date")
         stats = json.loads((out_dir / "stats.json").read_text())
         return StudyResult(
             out_dir, stats, ran, skipped, seconds, False, time.perf_counter() - started
         )
     say("statistics and figures" if figures else "statistics")
-    stats = write_study_outputs(out_dir, scene, case_files, figures)
+    stats = write_study_outputs(out_dir, scene, case_files, figures, piv_files)
     return StudyResult(out_dir, stats, ran, skipped, seconds, True, time.perf_counter() - started)
 
 
-def write_study_outputs(out_dir, scene, case_files, figures=True):
-    """``stats.json``, the figures and ``summary.md`` (last) of finished case files.
+def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
+    """``stats.json``, the figures and ``summary.md`` (last) of finished case files
+    (PTV render files, PIV case files).
 
     Returns
     -------
@@ -243,16 +256,23 @@ def write_study_outputs(out_dir, scene, case_files, figures=True):
     from rimcl.figures import write_figures
     from rimcl.stats import check_cases, compute_stats, load_render, write_json
 
-    all_tables = []
-    for path in case_files:
-        tables = load_render(path)
-        if tables.case != path.stem:
-            raise RimclError(f"{path} holds case {tables.case!r}, not {path.stem!r}")
-        all_tables.append(tables)
-    all_tables = check_cases(all_tables)
-    stats = compute_stats(all_tables, config={"scene": scene, "study_dir": str(out_dir)})
-    if figures:
-        write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
+    config = {"scene": scene, "study_dir": str(out_dir)}
+    stats = {"cases": [], "config": config}
+    if case_files:
+        all_tables = []
+        for path in case_files:
+            tables = load_render(path)
+            if tables.case != path.stem:
+                raise RimclError(f"{path} holds case {tables.case!r}, not {path.stem!r}")
+            all_tables.append(tables)
+        all_tables = check_cases(all_tables)
+        stats = compute_stats(all_tables, config=config)
+        if figures:
+            write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
+    if piv_files:
+        from rimcl.piv_study import add_study_results
+
+        add_study_results(stats, piv_files, out_dir / "figures" if figures else None, config)
     write_json(out_dir / "stats.json", stats, overwrite=True)
     _write_text(out_dir / "summary.md", summary_markdown(stats, scene))
     return stats
@@ -301,6 +321,11 @@ def summary_markdown(stats, scene):
     -------
     str
     """
+    if scene["run"]["mode"] == "piv":
+        from rimcl.piv_study import summary_lines
+
+        title = f"# rimcl study: {len(stats['cases'])} cases, PIV (rimcl {__version__})"
+        return "\n".join([title, *summary_lines(stats)])
     cases = stats["cases"]
     first = cases[0]
     camera = scene["camera"]
@@ -428,4 +453,6 @@ def summary_markdown(stats, scene):
             rows.append([f"rimcl, {name}", row[2], row[4], *row[5:]])
     lines += _table(header, rows)
     lines += ["", f"Paper: {PAPER_SOURCE}. Where: {PAPER_CITATIONS}", ""]
-    return "\n".join(lines)
+    from rimcl.piv_study import summary_lines
+
+    return "\n".join(lines + summary_lines(stats))

@@ -271,3 +271,28 @@ def test_figures_of_two_cases(box, device, tmp_path):
     # sorted by G: the uniform medium first, with every refraction error exactly zero
     assert pdfs["a"]["series"][0]["exactly_zero"]
     assert pdfs["f"]["G"] == [strong.stats["G"]]
+
+
+def test_ray_deposit_is_the_exact_renderer():
+    from scipy.special import ndtr
+
+    from rimcl.piv_images import deposit_rays
+    from rimcl.render import Renderer
+
+    renderer = Renderer("exact", 1.0, (0.0, 0.0), 0.75, 64, 16)
+    points = np.array([[10.3, 20.7], [30.5, 12.25], [0.2, 5.0]])  # (column, row)
+    weights = np.array([1.0, 0.5, 2.0])
+    frame = np.zeros((40, 50))
+    assert deposit_rays(frame, points, weights, renderer) == 0
+    # each ray alone through the exact renderer, on a canvas 10 px wider on every side
+    canvas = np.zeros((60, 70))
+    for point, weight in zip(points, weights, strict=True):
+        window = renderer.window_for(point[None])
+        image, _ = renderer.render(point[None], np.array([weight]), window)
+        rows, cols = window.row0 + 10, window.col0 + 10
+        canvas[rows : rows + window.height, cols : cols + window.width] += image
+    np.testing.assert_allclose(frame, canvas[10:50, 10:60], rtol=0, atol=1e-15)
+    # the third ray loses the light left of column 0
+    lost = weights[2] * ndtr(-0.2 / 0.75)
+    assert frame.sum() == pytest.approx(weights.sum() - lost, abs=1e-4)
+    assert deposit_rays(frame, np.array([[-3.0, 4.0]]), np.ones(1), renderer) == 1
