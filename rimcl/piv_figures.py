@@ -49,6 +49,12 @@ def _tables(cases):
     return [velocity_table(v, _pixel_size(s), s["dt"]) for v, s in cases]
 
 
+def _listed(values):
+    """Nested lists of an array for JSON, None where a value is not finite (no vector)."""
+    values = np.asarray(values, dtype=np.float64)
+    return np.where(np.isfinite(values), values, None).tolist()
+
+
 def _letter(ax, letter):
     ax.set_title(f"({letter})", loc="left", fontweight="bold")
 
@@ -139,11 +145,11 @@ def _vectors(cases):
         ax.set_title(f"{title}, {shown}", fontsize=8, loc="right")
         _letter(ax, letter)
         panels[letter] = {
-            "x_px": x.tolist(),
-            "y_px": y.tolist(),
-            "dx_px": u.tolist(),
-            "dy_px": v.tolist(),
-            "colour": colour[pick].tolist(),
+            "x_px": _listed(x),
+            "y_px": _listed(y),
+            "dx_px": _listed(u),
+            "dy_px": _listed(v),
+            "colour": _listed(colour[pick]),
             "colour_label": label,
         }
     figure.suptitle(
@@ -193,7 +199,7 @@ def _error_maps(cases):
             ax.set_xlabel("x (px)")
             ax.set_ylabel("y (px)")
             ax.set_title(f"{part}, {_case_label(stats)}", fontsize=8, loc="right")
-            panels[f"{part} {stats['name']}"] = {"magnitude_px": values.tolist()}
+            panels[f"{part} {stats['name']}"] = {"magnitude_px": _listed(values)}
         if mesh is not None:  # one colour scale per row
             figure.colorbar(mesh, ax=axes[row, :].tolist(), label=label)
     figure.suptitle("Per-vector errors (px): refraction, its optics part, and the PIV baseline")

@@ -163,7 +163,8 @@ def per_vector(render, field_vectors, uniform_vectors):
 
     valid_field, valid_uniform = usable(field_vectors), usable(uniform_vectors)
     has_truth = (truth["tracers"] > 0) & np.isfinite(truth["dx"]) & np.isfinite(truth["dy"])
-    return {
+    # copies: the truth and the uniform-medium vectors are shared by every case of a study
+    table = {
         "x": field_vectors.x,
         "y": field_vectors.y,
         "dx_field": field_vectors.dx,
@@ -182,6 +183,7 @@ def per_vector(render, field_vectors, uniform_vectors):
         "truth_tracers": truth["tracers"],
         "used": valid_field & valid_uniform & has_truth,
     }
+    return {name: np.array(values) for name, values in table.items()}
 
 
 def velocity_table(vectors, pixel_size, dt):

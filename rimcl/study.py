@@ -231,7 +231,11 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
     if mode != "ptv":
         from rimcl.piv_study import run_study_cases
 
-        piv_files, _ = run_study_cases(scene, out_dir, _comparable(scene), force=force, report=say)
+        piv_files, piv_ran = run_study_cases(
+            scene, out_dir, _comparable(scene), force=force, report=say
+        )
+        ran += [f"piv/{name}" for name in piv_ran]
+        skipped += [f"piv/{name}" for name in scene["cases"]["names"] if name not in piv_ran]
     case_files = [case_path(out_dir, name) for name in names]
     if not force and not ran and _up_to_date(out_dir, case_files + piv_files, figures, mode):
         say("statistics, figures and summary are up to date")

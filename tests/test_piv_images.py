@@ -260,6 +260,9 @@ def test_figures_of_two_cases(box, device, tmp_path):
 
     strong = run_piv_case(box, case="C4", **small(device))
     zero = run_piv_case(box, k_rho=0.0, reference=strong.reference, **small(device))
+    # a window without tracers: no truth there, and the vector is not used
+    strong.vectors["dx_true"][0, 0] = np.nan
+    strong.vectors["used"][0, 0] = False
     cases = [(strong.vectors, strong.stats), (zero.vectors, zero.stats)]
     written = write_piv_figures(cases, tmp_path, config={"test": True})
     assert len(written) == 3 * len(FIGURE_NAMES)
@@ -271,6 +274,8 @@ def test_figures_of_two_cases(box, device, tmp_path):
     # sorted by G: the uniform medium first, with every refraction error exactly zero
     assert pdfs["a"]["series"][0]["exactly_zero"]
     assert pdfs["f"]["G"] == [strong.stats["G"]]
+    maps = json.loads((tmp_path / "piv_error_maps.json").read_text())["panels"]
+    assert maps["baseline C4"]["magnitude_px"][0][0] is None
 
 
 def test_ray_deposit_is_the_exact_renderer():
