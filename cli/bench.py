@@ -2,7 +2,7 @@
 
 import click
 
-from rimcl.cli.options import device_option, field_option, handle_errors
+from rimcl.cli.options import COUNT, device_option, field_option, handle_errors
 
 _COLUMNS = (
     ("case", 5, "case"),
@@ -55,7 +55,7 @@ def _format(key, value):
 )
 @click.option(
     "--pixels",
-    type=int,
+    type=COUNT,
     default=8192,
     show_default=True,
     help="Camera pixels across the field of view L (errors are also given in pixels).",
@@ -83,9 +83,12 @@ def bench(out_dir, quick, field_path, cases, interps, precisions, pixels, device
     def split(text):
         return None if text is None else [item.strip() for item in text.split(",") if item]
 
-    click.echo("  ".join(title.ljust(width) for _, width, title in _COLUMNS))
+    shown = []
 
     def show(row):
+        if not shown:  # the header comes with the first row, not before a refusal
+            click.echo("  ".join(title.ljust(width) for _, width, title in _COLUMNS))
+        shown.append(row)
         cells = [_format(key, row[key]).ljust(width) for key, width, _ in _COLUMNS]
         click.echo("  ".join(cells).rstrip())
 

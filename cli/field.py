@@ -4,7 +4,15 @@ import json
 
 import click
 
-from rimcl.cli.options import handle_errors, overwrite_option
+from rimcl.cli.options import (
+    COUNT,
+    FINITE,
+    INDEX,
+    NON_NEGATIVE,
+    POSITIVE,
+    handle_errors,
+    overwrite_option,
+)
 
 _output_option = click.option(
     "-o", "--output", type=click.Path(dir_okay=False), required=True, help="Output file."
@@ -20,17 +28,28 @@ def field():
 
 
 @field.command()
-@click.option("--grid", default=64, show_default=True, help="Points per side N of the 2π box.")
-@click.option("--seed", default=0, show_default=True, help="Seed of the initial blobs.")
+@click.option(
+    "--grid",
+    type=click.IntRange(min=16),
+    default=64,
+    show_default=True,
+    help="Points per side N of the 2π box.",
+)
+@click.option("--seed", type=INDEX, default=0, show_default=True, help="Seed of the initial blobs.")
 @click.option(
     "--reynolds",
-    type=float,
+    type=POSITIVE,
     default=None,
     help="Reynolds number 1/ν (default 400 (N/64)^(4/3): k_max η ≈ 1 at the peak).",
 )
-@click.option("--frames", default=3, show_default=True, help="Frames to record.")
+@click.option("--frames", type=COUNT, default=3, show_default=True, help="Frames to record.")
 @click.option(
-    "--dt", "--frame-dt", default=0.005, show_default=True, help="Time between frames (L0/U0)."
+    "--dt",
+    "--frame-dt",
+    type=POSITIVE,
+    default=0.005,
+    show_default=True,
+    help="Time between frames (L0/U0).",
 )
 @click.option(
     "--gravity",
@@ -41,7 +60,7 @@ def field():
 )
 @click.option(
     "--start-time",
-    type=float,
+    type=NON_NEGATIVE,
     default=None,
     help="Record from this time instead of the kinetic-energy peak (short test runs).",
 )
@@ -111,10 +130,18 @@ def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, sheet
     "--frames", default=None, help="Time indices tttt to import, e.g. '285-287' (default all)."
 )
 @click.option(
-    "--t0", default=0.0, show_default=True, help="Time of index 1 (when files hold no times)."
+    "--t0",
+    type=FINITE,
+    default=0.0,
+    show_default=True,
+    help="Time of index 1 (when files hold no times).",
 )
 @click.option(
-    "--dt", default=0.04, show_default=True, help="Time between indices (JHTDB mixing: 0.04)."
+    "--dt",
+    type=POSITIVE,
+    default=0.04,
+    show_default=True,
+    help="Time between indices (JHTDB mixing: 0.04).",
 )
 @click.option(
     "--boundary",
@@ -124,7 +151,11 @@ def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, sheet
     help="auto: periodic when the grid spans a full --period on every axis.",
 )
 @click.option(
-    "--period", default=6.283185307179586, show_default=True, help="Box period (JHTDB: 2π)."
+    "--period",
+    type=POSITIVE,
+    default=6.283185307179586,
+    show_default=True,
+    help="Box period (JHTDB: 2π).",
 )
 @click.option(
     "--gradient",
@@ -172,23 +203,29 @@ def import_(inputs, axes, crop, stride, frames, t0, dt, boundary, period, gradie
 @field.command()
 @_field_argument
 @click.option("--json", "as_json", is_flag=True, help="Print JSON instead of text.")
+@click.option(
+    "--values",
+    is_flag=True,
+    help="Also stream every frame for value ranges, velocity rms and Δn_max per case.",
+)
 @handle_errors
-def info(field_path, as_json):
-    """Grid, frames, times, value ranges, memory and Δn_max per case of a field file.
+def info(field_path, as_json, values):
+    """Grid, frames, times, storage and memory of a field file (metadata only, at once
+    whatever its size); with --values also value ranges and Δn_max per case.
 
     FIELD defaults to the shipped sample.
     """
     from rimcl.flow import sample_path
     from rimcl.flow.info import describe_field_file, format_description
 
-    described = describe_field_file(field_path or sample_path())
+    described = describe_field_file(field_path or sample_path(), values=values)
     click.echo(json.dumps(described, indent=2) if as_json else format_description(described))
 
 
 @field.command()
 @_field_argument
-@click.option("--frame", default=0, show_default=True, help="Stored frame to show.")
-@click.option("--time", type=float, default=None, help="Interpolate to this time instead.")
+@click.option("--frame", type=INDEX, default=0, show_default=True, help="Stored frame to show.")
+@click.option("--time", type=FINITE, default=None, help="Interpolate to this time instead.")
 @click.option(
     "--plane",
     type=click.Choice(["x2x3", "x1x2", "x1x3"]),
@@ -197,7 +234,7 @@ def info(field_path, as_json):
     help="Slice plane (x2x3 is parallel to the light sheet).",
 )
 @click.option(
-    "--at", type=float, default=None, help="Plane position along its normal (default: middle)."
+    "--at", type=FINITE, default=None, help="Plane position along its normal (default: middle)."
 )
 @click.option(
     "--quantity",
@@ -207,7 +244,9 @@ def info(field_path, as_json):
     help="What to draw.",
 )
 @click.option("--case", default=None, help="Gladstone–Dale case C0..C4: show δn and |∇n|.")
-@click.option("--k-rho", type=float, default=None, help="Custom Gladstone–Dale product G = Kρ.")
+@click.option(
+    "--k-rho", type=NON_NEGATIVE, default=None, help="Custom Gladstone–Dale product G = Kρ."
+)
 @click.option(
     "-o",
     "--output",

@@ -10,6 +10,7 @@ import logging
 import click
 
 from rimcl import __version__
+from rimcl.cli.options import run_reporting_errors
 
 # command name -> (module, attribute, one-line help)
 COMMANDS = {
@@ -36,6 +37,11 @@ class LazyGroup(click.Group):
             return None
         module, attr, _ = COMMANDS[name]
         return getattr(importlib.import_module(module), attr)
+
+    def invoke(self, ctx):
+        # every command, and anything between click and the command, reports failures
+        # as one line (tracebacks with -v)
+        return run_reporting_errors(ctx, lambda: super(LazyGroup, self).invoke(ctx))
 
     def format_commands(self, ctx, formatter):
         rows = [(name, help_text) for name, (_, _, help_text) in COMMANDS.items()]

@@ -1,10 +1,60 @@
 """Options and error handling shared by the ``rimcl`` subcommands."""
 
+import errno
 import functools
+import math
 
 import click
 
-from rimcl.errors import RimclError
+from rimcl.errors import RimclError, first_line
+
+#: Longest error line printed (a message quoting a huge value is cut).
+_LONGEST_MESSAGE = 400
+#: Largest step count the kernels take (a signed 32-bit counter).
+MAX_STEPS_LIMIT = 2**31 - 1
+
+
+class FiniteFloat(click.ParamType):
+    """A finite number, optionally bounded below (inclusive or not) and above.
+
+    Parameters
+    ----------
+    minimum, maximum : float, optional
+    open_minimum : bool
+        Refuse ``minimum`` itself (``positive`` numbers: ``minimum=0, open_minimum=True``).
+    """
+
+    name = "float"
+
+    def __init__(self, minimum=None, maximum=None, open_minimum=False):
+        self.minimum, self.maximum, self.open_minimum = minimum, maximum, open_minimum
+
+    def convert(self, value, param, ctx):
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"must be a finite number, got {value!r}", param, ctx)
+        low = self.minimum
+        if low is not None and (number < low or (self.open_minimum and number == low)):
+            bound = ">" if self.open_minimum else ">="
+            self.fail(f"must be {bound} {low:g}, got {value}", param, ctx)
+        if self.maximum is not None and number > self.maximum:
+            self.fail(f"must be <= {self.maximum:g}, got {value}", param, ctx)
+        return number
+
+
+#: A finite number > 0 (lengths, times, σ, Reynolds numbers).
+POSITIVE = FiniteFloat(0.0, open_minimum=True)
+#: A finite number >= 0.
+NON_NEGATIVE = FiniteFloat(0.0)
+#: Any finite number.
+FINITE = FiniteFloat()
+#: A count of at least one (tracers, rays, pixels, frames).
+COUNT = click.IntRange(min=1)
+#: A seed or an index: an integer >= 0.
+INDEX = click.IntRange(min=0)
 
 device_option = click.option(
     "--device",
@@ -25,10 +75,10 @@ case_option = click.option(
     "--case", default=None, help="Gladstone–Dale case C0..C4 (default C1, air)."
 )
 k_rho_option = click.option(
-    "--k-rho", type=float, default=None, help="Custom Gladstone–Dale product G = Kρ."
+    "--k-rho", type=NON_NEGATIVE, default=None, help="Custom Gladstone–Dale product G = Kρ."
 )
 seed_option = click.option(
-    "--seed", type=int, default=0, show_default=True, help="Random seed (tracers, rays)."
+    "--seed", type=INDEX, default=0, show_default=True, help="Random seed (tracers, rays)."
 )
 overwrite_option = click.option(
     "--overwrite", is_flag=True, help="Replace an existing output file."
@@ -56,7 +106,7 @@ step_option = click.option(
 )
 tolerance_option = click.option(
     "--tolerance",
-    type=float,
+    type=POSITIVE,
     default=None,
     metavar="LENGTH",
     help="Allowed error of the image points r' for --step adaptive/auto and --interp auto "
@@ -74,34 +124,67 @@ def parse_step(value):
         raise click.BadParameter(
             f"{value!r} is not a number, 'auto' or 'adaptive'", param_hint="--step"
         ) from None
-    if not step > 0:
-        raise click.BadParameter("the step must be positive", param_hint="--step")
+    if not (step > 0 and math.isfinite(step)):
+        raise click.BadParameter(
+            f"the step must be a positive finite number, got {value!r}", param_hint="--step"
+        )
     return step
 
 
-def case_or_default(case, k_rho):
-    """The case to use when neither ``--case`` nor ``--k-rho`` is given: C1 (air)."""
-    return "C1" if case is None and k_rho is None else case
+def _disk_full(exc):
+    return isinstance(exc, OSError) and (
+        exc.errno == errno.ENOSPC or "No space left on device" in str(exc)
+    )
+
+
+def describe_failure(exc):
+    """One line a user can act on, for any exception a command raised.
+
+    :class:`RimclError` carries its own words; memory and disk-full errors are named as
+    such; other operating-system errors give their reason and file; anything else is
+    named by its type (with -v the traceback is shown instead).
+
+    Returns
+    -------
+    str
+        A single line (newlines folded, cut at a few hundred characters).
+    """
+    if isinstance(exc, RimclError):
+        text = str(exc)
+    elif isinstance(exc, MemoryError):
+        detail = str(exc) or "an allocation failed"
+        text = f"out of memory ({detail}); ask for a smaller grid, fewer tracers or fewer rays"
+    elif _disk_full(exc):
+        where = f" writing {exc.filename}" if getattr(exc, "filename", None) else ""
+        text = f"the disk is full (no space left on device{where}); free space and run again"
+    elif isinstance(exc, OSError) and exc.strerror:
+        text = exc.strerror + (f": {exc.filename}" if exc.filename else "")
+    else:
+        text = f"{type(exc).__name__}: {first_line(exc)} (rimcl -v shows where)"
+    text = " ".join(text.split())
+    if len(text) > _LONGEST_MESSAGE:
+        text = text[: _LONGEST_MESSAGE - 1] + "…"
+    return text
+
+
+def run_reporting_errors(ctx, call):
+    """Run ``call()``; turn any failure into one line and exit status 1 (tracebacks with
+    ``rimcl -v``). Click's own exceptions (usage errors: status 2) pass through."""
+    try:
+        return call()
+    except (click.ClickException, click.exceptions.Exit, click.Abort):
+        raise
+    except Exception as exc:
+        if bool((ctx.find_root().obj or {}).get("verbose")):
+            raise
+        raise click.ClickException(describe_failure(exc)) from None
 
 
 def handle_errors(func):
-    """Turn library errors into one clear line and exit status 1 (tracebacks with -v)."""
+    """Turn every failure of a command into one clear line and exit status 1."""
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
-        ctx = click.get_current_context()
-        verbose = bool((ctx.find_root().obj or {}).get("verbose"))
-        try:
-            return func(*args, **kwargs)
-        except (click.ClickException, click.exceptions.Exit, click.Abort):
-            raise
-        except RimclError as exc:
-            if verbose:
-                raise
-            raise click.ClickException(str(exc)) from None
-        except (OSError, ValueError) as exc:
-            if verbose:
-                raise
-            raise click.ClickException(f"{type(exc).__name__}: {exc}") from None
+        return run_reporting_errors(click.get_current_context(), lambda: func(*args, **kwargs))
 
     return wrapper

@@ -4,8 +4,12 @@ import click
 import numpy as np
 
 from rimcl.cli.options import (
+    COUNT,
+    FINITE,
+    INDEX,
+    NON_NEGATIVE,
+    POSITIVE,
     case_option,
-    case_or_default,
     device_option,
     field_option,
     handle_errors,
@@ -16,17 +20,22 @@ from rimcl.cli.options import (
     seed_option,
     step_option,
 )
+from rimcl.summary import number
 
 window_option = click.option(
-    "--window", default=32, show_default=True, help="Interrogation window of the last pass (px)."
+    "--window",
+    type=COUNT,
+    default=32,
+    show_default=True,
+    help="Interrogation window of the last pass (px).",
 )
 overlap_option = click.option(
-    "--overlap", default=0.5, show_default=True, help="Window overlap (fraction)."
+    "--overlap",
+    type=NON_NEGATIVE,
+    default=0.5,
+    show_default=True,
+    help="Window overlap (fraction).",
 )
-
-
-def _number(value):
-    return "n/a" if value is None else f"{value:.3g}"
 
 
 def echo_piv_case_lines(stats):
@@ -38,8 +47,8 @@ def echo_piv_case_lines(stats):
         pixels, u3 = piv["displacement_px"], piv["velocity"]["u3"]
         click.echo(
             f"{'PIV ' + case['name']:>8}  G = {piv['G']:.3g}: {piv['n_used']}/{piv['n_vectors']} "
-            f"vectors, refraction {_number(pixels['refraction_rms'])} px rms (truth "
-            f"{_number(pixels['truth_rms'])} px), u3 rms(ε)/rms(u) {_number(u3['rms_normalized'])}"
+            f"vectors, refraction {number(pixels['refraction_rms'])} px rms (truth "
+            f"{number(pixels['truth_rms'])} px), u3 rms(ε)/rms(u) {number(u3['rms_normalized'])}"
         )
 
 
@@ -56,21 +65,25 @@ def piv():
 )
 @window_option
 @overlap_option
-@click.option("--passes", default=3, show_default=True, help="Passes (2+: window deformation).")
+@click.option(
+    "--passes", type=COUNT, default=3, show_default=True, help="Passes (2+: window deformation)."
+)
 @click.option(
     "--first-window",
-    type=int,
+    type=COUNT,
     default=None,
     help="Window of the first pass (px) [default: --window]; shrinks to --window.",
 )
 @click.option(
     "--outlier-eps",
+    type=POSITIVE,
     default=0.1,
     show_default=True,
     help="eps of the normalized median test (px).",
 )
 @click.option(
     "--outlier-threshold",
+    type=POSITIVE,
     default=2.0,
     show_default=True,
     help="Threshold of the normalized median test.",
@@ -126,22 +139,33 @@ def analyze(
 @field_option
 @case_option
 @k_rho_option
-@click.option("--pixels", default=512, show_default=True, help="Pixels across the field of view.")
 @click.option(
-    "--density", default=0.03, show_default=True, help="Particle images per pixel in the sheet."
+    "--pixels", type=COUNT, default=512, show_default=True, help="Pixels across the field of view."
 )
 @click.option(
-    "--diameter", default=3.0, show_default=True, help="Particle image diameter d = 4σ (px)."
+    "--density",
+    type=POSITIVE,
+    default=0.03,
+    show_default=True,
+    help="Particle images per pixel in the sheet.",
+)
+@click.option(
+    "--diameter",
+    type=POSITIVE,
+    default=3.0,
+    show_default=True,
+    help="Particle image diameter d = 4σ (px).",
 )
 @click.option(
     "--sheet-thickness",
-    type=float,
+    type=POSITIVE,
     default=None,
     help="Light sheet 1/e² thickness (field length units) [default: 8 pixels].",
 )
 @click.option("--bit-depth", type=click.IntRange(8, 16), default=16, show_default=True)
 @click.option(
     "--peak-fraction",
+    type=POSITIVE,
     default=0.5,
     show_default=True,
     help="Peak of an isolated in-focus particle, fraction of full scale.",
@@ -153,22 +177,26 @@ def analyze(
     show_default=True,
     help="plane: M×M rays to the exit plane (the paper); pupil: rays over a lens aperture.",
 )
-@click.option("--fan", default=8, show_default=True, help="M of the plane camera.")
-@click.option("--pupil-rays", default=64, show_default=True, help="Rays per tracer (pupil).")
-@click.option("--aperture-diameter", type=float, default=None, help="Pupil diameter.")
-@click.option("--focal-length", type=float, default=None, help="With --f-number: D = F / N.")
-@click.option("--f-number", type=float, default=None, help="With --focal-length: D = F / N.")
-@click.option("--camera-distance", type=float, default=None, help="Sheet to pupil [4 L1].")
-@click.option("--view-angle", type=float, default=0.0, show_default=True, help="Degrees.")
-@click.option("--start-frame", default=0, show_default=True, help="Field frame of exposure A.")
+@click.option("--fan", type=COUNT, default=8, show_default=True, help="M of the plane camera.")
+@click.option(
+    "--pupil-rays", type=COUNT, default=64, show_default=True, help="Rays per tracer (pupil)."
+)
+@click.option("--aperture-diameter", type=POSITIVE, default=None, help="Pupil diameter.")
+@click.option("--focal-length", type=POSITIVE, default=None, help="With --f-number: D = F / N.")
+@click.option("--f-number", type=POSITIVE, default=None, help="With --focal-length: D = F / N.")
+@click.option("--camera-distance", type=POSITIVE, default=None, help="Sheet to pupil [4 L1].")
+@click.option("--view-angle", type=FINITE, default=0.0, show_default=True, help="Degrees.")
+@click.option(
+    "--start-frame", type=INDEX, default=0, show_default=True, help="Field frame of exposure A."
+)
 @click.option(
     "--dt",
-    type=float,
+    type=POSITIVE,
     default=0.1,
     show_default=True,
     help="Time between exposures (0.1 on the sample: 1.3 px rms at 512 px).",
 )
-@click.option("--x-sheet", type=float, default=None, help="Sheet centre x1 [default: scene].")
+@click.option("--x-sheet", type=FINITE, default=None, help="Sheet centre x1 [default: scene].")
 @window_option
 @overlap_option
 @click.option(
@@ -235,6 +263,7 @@ def render(
       rimcl piv analyze water_field_A.tif water_field_B.tif -o water_vectors.h5
     """
     from rimcl.config import CameraConfig, IntegratorConfig, RunConfig
+    from rimcl.flow.fieldfile import case_arguments
     from rimcl.piv import PivSettings
     from rimcl.piv_images import (
         PivConfig,
@@ -270,9 +299,10 @@ def render(
         distance=camera_distance,
         view_angle=view_angle,
     )
+    case, k_rho = case_arguments(field_path, case, k_rho)
     result = run_piv_render(
         field_path,
-        case=case_or_default(case, k_rho),
+        case=case,
         k_rho=k_rho,
         piv=piv_config,
         camera=camera_config,

@@ -4,8 +4,12 @@ import click
 import numpy as np
 
 from rimcl.cli.options import (
+    COUNT,
+    INDEX,
+    NON_NEGATIVE,
+    POSITIVE,
+    FiniteFloat,
     case_option,
-    case_or_default,
     device_option,
     field_option,
     handle_errors,
@@ -23,7 +27,9 @@ from rimcl.cli.options import (
 @field_option
 @case_option
 @k_rho_option
-@click.option("--tracers", default=1000, show_default=True, help="Tracers in the sheet.")
+@click.option(
+    "--tracers", type=COUNT, default=1000, show_default=True, help="Tracers in the sheet."
+)
 @click.option(
     "--camera",
     type=click.Choice(["plane", "pupil"]),
@@ -31,25 +37,29 @@ from rimcl.cli.options import (
     show_default=True,
     help="plane: M×M rays to the exit plane (the paper); pupil: rays over a lens aperture.",
 )
-@click.option("--fan", default=32, show_default=True, help="M of the plane camera (paper: 100).")
-@click.option("--pupil-rays", default=1024, show_default=True, help="Rays per tracer (pupil).")
+@click.option(
+    "--fan", type=COUNT, default=32, show_default=True, help="M of the plane camera (paper: 100)."
+)
+@click.option(
+    "--pupil-rays", type=COUNT, default=1024, show_default=True, help="Rays per tracer (pupil)."
+)
 @click.option(
     "--aperture-diameter",
-    type=float,
+    type=POSITIVE,
     default=None,
     help="Pupil diameter, field length units [default: camera distance / 4].",
 )
-@click.option("--focal-length", type=float, default=None, help="With --f-number: D = F / N.")
-@click.option("--f-number", type=float, default=None, help="With --focal-length: D = F / N.")
+@click.option("--focal-length", type=POSITIVE, default=None, help="With --f-number: D = F / N.")
+@click.option("--f-number", type=POSITIVE, default=None, help="With --focal-length: D = F / N.")
 @click.option(
     "--camera-distance",
-    type=float,
+    type=POSITIVE,
     default=None,
     help="Sheet to pupil centre along the viewing axis [default: 4 L1].",
 )
 @click.option(
     "--view-angle",
-    type=float,
+    type=FiniteFloat(-90.0, 90.0),
     default=0.0,
     show_default=True,
     help="Viewing axis angle to x1, towards +x2 (degrees).",
@@ -63,13 +73,17 @@ from rimcl.cli.options import (
 )
 @click.option(
     "--pixels",
+    type=COUNT,
     default=8192,
     show_default=True,
     help="Pixels across the wider side of the field of view (paper: 8192).",
 )
-@click.option("--psf-sigma", default=2.3, show_default=True, help="Gaussian PSF σ in pixels.")
+@click.option(
+    "--psf-sigma", type=POSITIVE, default=2.3, show_default=True, help="Gaussian PSF σ in pixels."
+)
 @click.option(
     "--threshold",
+    type=NON_NEGATIVE,
     default=100.0,
     show_default=True,
     help="Grey threshold in camera counts (paper, 10 bits: 100 air, 500 water).",
@@ -82,7 +96,11 @@ from rimcl.cli.options import (
     help="excess: grey minus threshold; grey: grey value (the paper, biased).",
 )
 @click.option(
-    "--max-window", default=512, show_default=True, help="Largest tracer window side (px)."
+    "--max-window",
+    type=COUNT,
+    default=512,
+    show_default=True,
+    help="Largest tracer window side (px).",
 )
 @click.option(
     "--bit-depth",
@@ -117,9 +135,12 @@ from rimcl.cli.options import (
 @click.option(
     "--fit-order", type=click.IntRange(min=2), default=2, show_default=True, help="Fit order."
 )
-@click.option("--start-frame", default=0, show_default=True, help="First field frame used.")
+@click.option(
+    "--start-frame", type=INDEX, default=0, show_default=True, help="First field frame used."
+)
 @click.option(
     "--margin",
+    type=FiniteFloat(0.0, 0.5),
     default=0.05,
     show_default=True,
     help="Edge band free of tracers (fraction of the field of view).",
@@ -156,13 +177,14 @@ def render(field_path, case, k_rho, step, frame_image, device_spec, output, over
     """
     from rimcl.config import MeasureConfig
     from rimcl.device import describe_device
+    from rimcl.flow.fieldfile import case_arguments
     from rimcl.measure import check_frame_image, run_render, write_frame_image, write_render
     from rimcl.provenance import check_output
 
     check_output(output, overwrite)
     if frame_image is not None:
         check_frame_image(frame_image, overwrite)
-    case = case_or_default(case, k_rho)
+    case, k_rho = case_arguments(field_path, case, k_rho)
     config = MeasureConfig.from_options(
         **options,
         step=parse_step(step),

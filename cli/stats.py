@@ -3,10 +3,7 @@
 import click
 
 from rimcl.cli.options import handle_errors, overwrite_option
-
-
-def _percent(value):
-    return "n/a" if value is None else f"{100 * value:.3g} %"
+from rimcl.summary import number, percent
 
 
 def echo_case_lines(stats):
@@ -15,9 +12,9 @@ def echo_case_lines(stats):
         velocity, acceleration = case["velocity"]["u3"], case["acceleration"]["a3"]
         click.echo(
             f"{case['name']:>8}  G = {case['G']:.3g}: {case['n_used']}/{case['n_tracers']} "
-            f"tracers, |ε_x| peak {case['position_error_peak_over_L']:.3g} L, "
-            f"u3 {_percent(velocity['systematic'])} ± {_percent(velocity['random'])}, "
-            f"a3 {_percent(acceleration['systematic'])} ± {_percent(acceleration['random'])}"
+            f"tracers, |ε_x| peak {number(case['position_error_peak_over_L'])} L, "
+            f"u3 {percent(velocity['systematic'])} ± {percent(velocity['random'])}, "
+            f"a3 {percent(acceleration['systematic'])} ± {percent(acceleration['random'])}"
         )
 
 

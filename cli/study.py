@@ -4,7 +4,14 @@ from pathlib import Path
 
 import click
 
-from rimcl.cli.options import device_option, handle_errors
+from rimcl.cli.options import (
+    COUNT,
+    INDEX,
+    NON_NEGATIVE,
+    POSITIVE,
+    device_option,
+    handle_errors,
+)
 from rimcl.cli.piv import echo_piv_case_lines
 from rimcl.cli.stats import echo_case_lines
 
@@ -60,19 +67,19 @@ def _case_list(_ctx, _param, value):
     callback=_case_list,
     help="Comma-separated cases, e.g. C0,C1,C4 or G=0.01 [scene: cases.names].",
 )
-@click.option("--tracers", type=click.IntRange(min=1), help="Tracers [tracers.count].")
-@click.option("--seed", type=click.IntRange(min=0), help="Random seed [tracers.seed].")
+@click.option("--tracers", type=COUNT, help="Tracers [tracers.count].")
+@click.option("--seed", type=INDEX, help="Random seed [tracers.seed].")
 @click.option("--camera", type=click.Choice(["plane", "pupil"]), help="Camera model [camera.kind].")
-@click.option("--fan", type=click.IntRange(min=1), help="Plane camera rays per side [camera.fan].")
+@click.option("--fan", type=COUNT, help="Plane camera rays per side [camera.fan].")
 @click.option("--renderer", type=click.Choice(["exact", "paper"]), help="Renderer [renderer.kind].")
-@click.option("--pixels", type=click.IntRange(min=1), help="Pixels across [renderer.pixels].")
-@click.option("--threshold", type=float, help="Grey threshold, counts [renderer.threshold].")
+@click.option("--pixels", type=COUNT, help="Pixels across [renderer.pixels].")
+@click.option("--threshold", type=NON_NEGATIVE, help="Grey threshold, counts [renderer.threshold].")
 @click.option(
     "--precision",
     type=click.Choice(["f32", "f32c", "f64"]),
     help="Accumulation precision [integrator.precision].",
 )
-@click.option("--step", type=float, help="Integration step in t = s/n [integrator.step].")
+@click.option("--step", type=POSITIVE, help="Integration step in t = s/n [integrator.step].")
 @device_option
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
 @handle_errors

@@ -6,8 +6,11 @@ import click
 import numpy as np
 
 from rimcl.cli.options import (
+    COUNT,
+    INDEX,
+    MAX_STEPS_LIMIT,
+    POSITIVE,
     case_option,
-    case_or_default,
     device_option,
     field_option,
     handle_errors,
@@ -26,7 +29,7 @@ ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
 
 @click.command()
 @field_option
-@click.option("--frame", default=0, show_default=True, help="Frame of the field file.")
+@click.option("--frame", type=INDEX, default=0, show_default=True, help="Frame of the field file.")
 @case_option
 @k_rho_option
 @click.option(
@@ -37,12 +40,16 @@ ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
 )
 @click.option(
     "--length",
-    type=float,
+    type=POSITIVE,
     default=None,
     help="Depth L1 of the traced slab (default: the field's depth; π for --analytic).",
 )
-@click.option("--tracers", default=10, show_default=True, help="Random tracers in the sheet.")
-@click.option("--fan", default=32, show_default=True, help="M: each tracer sends M×M rays.")
+@click.option(
+    "--tracers", type=COUNT, default=10, show_default=True, help="Random tracers in the sheet."
+)
+@click.option(
+    "--fan", type=COUNT, default=32, show_default=True, help="M: each tracer sends M×M rays."
+)
 @click.option(
     "--rays",
     "rays_path",
@@ -54,7 +61,12 @@ ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
 @precision_option
 @step_option
 @tolerance_option
-@click.option("--max-steps", type=int, default=None, help="Stop rays after this many steps.")
+@click.option(
+    "--max-steps",
+    type=click.IntRange(1, MAX_STEPS_LIMIT),
+    default=None,
+    help="Stop rays after this many steps.",
+)
 @device_option
 @seed_option
 @click.option(
@@ -97,33 +109,36 @@ def trace(
       rimcl trace --analytic grin --length 100 --fan 8 -o grin.h5
     """
     from rimcl.device import describe_device, select_device
-    from rimcl.field import analytic_field
-    from rimcl.flow.cases import resolve_k_rho
-    from rimcl.flow.fieldfile import load_field
+    from rimcl.field import Field, analytic_field
+    from rimcl.flow.fieldfile import case_arguments, load_field
+    from rimcl.memory import check_field_upload, check_trace_memory
     from rimcl.provenance import check_output
     from rimcl.rays import fan_rays, read_rays, scene_for, write_trace
     from rimcl.trace import trace_rays
 
     check_output(output, overwrite)
-    device = select_device(device_spec)
     if analytic is not None:
         field = analytic_field(analytic)
         source = {"analytic": analytic, "params": field.params}
     else:
-        case_name, g = resolve_k_rho(case=case_or_default(case, k_rho), k_rho=k_rho)
-        field = load_field(field_path, frame=frame, k_rho=g)
+        case, k_rho = case_arguments(field_path, case, k_rho)
+        field = load_field(field_path, frame=frame, case=case, k_rho=k_rho)
         source = {
             "field": field_path or "shipped sample",
             "frame": frame,
-            "case": case_name,
-            "k_rho": g,
+            "case": field.attrs.get("case", "delta_n"),
+            "k_rho": field.attrs.get("k_rho"),
         }
     scene = scene_for(field, length)
     tracer_id = None
     if rays_path is not None:
         origins, directions = read_rays(rays_path)
     else:
+        check_trace_memory(tracers * fan**2, "tracing")
         origins, directions, tracer_id = fan_rays(scene, tracers, fan, seed)
+    device = select_device(device_spec)
+    if interp != "auto" and isinstance(field, Field):
+        check_field_upload(field.shape, device, interp)
     started = time.perf_counter()
     result = trace_rays(
         field,

@@ -4,7 +4,7 @@ import json
 
 import click
 
-from rimcl.cli.options import device_option, handle_errors
+from rimcl.cli.options import COUNT, device_option, handle_errors
 
 _COLUMNS = ("case", "interp", "precision", "step", "grid", "max error", "tolerance", "pass")
 
@@ -24,7 +24,7 @@ def _cells(row):
 
 @click.command()
 @device_option
-@click.option("--rays", default=16, show_default=True, help="Rays per case.")
+@click.option("--rays", type=COUNT, default=16, show_default=True, help="Rays per case.")
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON.")
 @handle_errors
 def verify(device_spec, rays, as_json):

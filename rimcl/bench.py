@@ -48,6 +48,8 @@ from rimcl.trace import (
 
 #: The Gladstone–Dale cases benchmarked by default: air and water (DESIGN §2).
 DEFAULT_CASES = ("C1", "C4")
+#: The one case of a field file that stores δn (its own refractive index).
+DELTA_N_CASE = "delta_n"
 #: Step factors (times the default step, half a cell of arc), full and quick sweeps.
 STEP_FACTORS = (8.0, 4.0, 2.0, 1.0, 0.5, 0.25)
 QUICK_STEP_FACTORS = (4.0, 1.0, 0.25)
@@ -108,9 +110,9 @@ class BenchCase:
     Attributes
     ----------
     name : str
-        Case name (``C1``, ``C4``, ``G=...``).
-    k_rho : float
-        Gladstone–Dale product of the case.
+        Case name (``C1``, ``C4``, ``G=...``, or ``delta_n`` for a file of δn).
+    k_rho : float or None
+        Gladstone–Dale product of the case; None for a file of δn.
     field : Field
     origins, directions : ndarray, shape (N, 3)
     x_end : float
@@ -173,14 +175,19 @@ def bench_cases(field_path=None, cases=DEFAULT_CASES, quick=False, pixels=PAPER_
     list of BenchCase
     """
     from rimcl.flow.cases import resolve_k_rho
+    from rimcl.flow.fieldfile import field_kind
     from rimcl.rays import fan_rays, scene_for
 
     if int(pixels) < 1:
         raise RimclError(f"the camera needs at least one pixel, got {pixels}")
     tracers, fan = QUICK_RAY_SET if quick else RAY_SET
     found = []
-    for case in cases:
-        name, k_rho = resolve_k_rho(case=case)
+    if field_path is not None and field_kind(field_path) == "delta_n":
+        # the file carries its own refractive index: one case, whatever the cases say
+        resolved = [(DELTA_N_CASE, None)]
+    else:
+        resolved = [resolve_k_rho(case=case) for case in cases]
+    for name, k_rho in resolved:
         field = _load(field_path, k_rho)
         scene = scene_for(field)
         origins, directions, _ = fan_rays(scene, tracers, fan, seed)
@@ -197,7 +204,7 @@ def _load(field_path, k_rho):
     from rimcl.flow.fieldfile import load_field
 
     if field_path is not None:
-        return load_field(field_path, 0, k_rho=k_rho)
+        return load_field(field_path, 0, k_rho=k_rho)  # k_rho None: the file's own δn
     try:
         return load_field(None, 0, k_rho=k_rho)
     except RimclError:
@@ -484,8 +491,9 @@ def mark_failures(rows):
 
 def write_csv(path, rows, meta):
     """Write the rows as CSV with ``#`` comment lines holding configuration, versions and
-    device (read with ``pandas.read_csv(path, comment="#")``)."""
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8") as out:
+    device (read with ``pandas.read_csv(path, comment="#")``). :func:`bench` makes the
+    three outputs atomic together."""
+    with open(path, "w", encoding="utf-8") as out:
         out.write("# rimcl bench: speed against accuracy of the tracing methods\n")
         out.write(f"# config: {to_json({k: v for k, v in meta.items() if k != 'device'})}\n")
         out.write(f"# device: {to_json(meta['device'])}\n")
@@ -506,10 +514,9 @@ def _cell(value):
 
 def write_json(path, rows, meta):
     """The rows and the configuration as one JSON document."""
-    with atomic_path(path) as tmp:
-        Path(tmp).write_text(
-            to_json({"meta": meta, "versions": versions(), "rows": rows}), encoding="utf-8"
-        )
+    Path(path).write_text(
+        to_json({"meta": meta, "versions": versions(), "rows": rows}), encoding="utf-8"
+    )
 
 
 _COLORS = {"trilinear": "#1f77b4", "texture": "#2ca02c", "bspline3": "#d62728"}
@@ -614,7 +621,9 @@ def plot_pareto(path, rows, meta):
         )
         shape = "x".join(str(n) for n in info["field"]["shape_n3_n2_n1"][::-1])
         ax.set_title(
-            f"{name}: G = {info['k_rho']:.3g}, Δn = {info['field']['delta_n_range']:.2g}, "
+            f"{name}: "
+            + ("δn stored" if info["k_rho"] is None else f"G = {info['k_rho']:.3g}")
+            + f", Δn = {info['field']['delta_n_range']:.2g}, "
             f"{shape} nodes, {info['rays']} rays\n{_reference_counts(rows, name)}",
             fontsize=9.5,
         )
@@ -656,13 +665,12 @@ def plot_pareto(path, rows, meta):
         fontsize=11,
     )
     record = {"device": meta["device"], "versions": versions(), "references": meta["references"]}
-    with atomic_path(path) as tmp:
-        figure.savefig(
-            tmp,
-            format="png",
-            dpi=130,
-            metadata={"Software": f"rimcl bench {__version__}", "Description": to_json(record)},
-        )
+    figure.savefig(
+        path,
+        format="png",
+        dpi=130,
+        metadata={"Software": f"rimcl bench {__version__}", "Description": to_json(record)},
+    )
 
 
 def bench(
@@ -702,8 +710,13 @@ def bench(
         ``csv``, ``json``, ``png`` paths, ``rows`` and ``meta``.
     """
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    if cases is not None and not list(cases):
+        raise RimclError("name at least one case to benchmark (e.g. C1,C4)")
     found = bench_cases(field_path, cases, quick=quick, pixels=pixels)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RimclError(f"cannot create output directory {out_dir}: {exc.strerror}") from None
     rows, meta = run_bench(
         found,
         device=device,
@@ -713,12 +726,17 @@ def bench(
         progress=progress,
     )
     meta["pixels"] = int(pixels)
+    if not rows:
+        raise RimclError("the sweep produced no results; nothing was written")
     paths = {
         "csv": out_dir / "bench.csv",
         "json": out_dir / "bench.json",
         "png": out_dir / "bench.png",
     }
-    write_csv(paths["csv"], rows, meta)
-    write_json(paths["json"], rows, meta)
-    plot_pareto(paths["png"], rows, meta)
+    # all three or none: a failure in any (the plot, a full disk) keeps the earlier results
+    with contextlib.ExitStack() as stack:
+        temporary = {key: stack.enter_context(atomic_path(path)) for key, path in paths.items()}
+        write_csv(temporary["csv"], rows, meta)
+        write_json(temporary["json"], rows, meta)
+        plot_pareto(temporary["png"], rows, meta)
     return {**paths, "rows": rows, "meta": meta}

@@ -34,6 +34,7 @@ from rimcl.field import Field
 from rimcl.flow.crop import CroppedSource
 from rimcl.imaging import Imaging, empty_columns, image_batch
 from rimcl.media import index_from_density
+from rimcl.memory import check_field_memory, check_field_upload, check_render_memory
 from rimcl.provenance import atomic_path, check_output, stamp_h5, to_json
 from rimcl.render import FrameImage
 from rimcl.sensor import MEASURED_PASS, REFERENCE_PASS
@@ -297,6 +298,25 @@ class Setup:
     timings: dict
 
 
+def _check_memory(source, source_name, config, camera, imaging, device, frames):
+    """Refuse, before anything is allocated, a run that cannot fit in host or device memory."""
+    renderer = imaging.renderer
+    check_field_memory(source.shape, f"a frame of {source_name}")
+    check_render_memory(
+        int(config.tracers.count),
+        camera.rays_per_tracer,
+        int(config.run.rays_per_batch),
+        frames,
+        renderer.max_window,
+        math.ceil(float(np.max(camera.scene.fov_size)) / renderer.pixel_size),
+        renderer.psf_sigma,
+        bool(config.run.frame_image),
+    )
+    check_field_upload(
+        source.shape, device, config.integrator.interp, f"the field of {source_name}"
+    )
+
+
 def _shard_range(shard, total):
     """``(first, stop)`` tracer indices of a shard (None: all ``total`` tracers)."""
     if shard is None:
@@ -372,6 +392,7 @@ def _setup(source, source_name, case_index, config, streams, shard):
     imaging = config.renderer.build(scene, camera, sensor)
     mie = config.mie.build(config.fluid.build())
     device = select_device(config.run.device)
+    _check_memory(source, source_name, config, camera, imaging, device, len(frame_ids))
     every_tracer = seed_tracers(
         config.tracers.count,
         scene,

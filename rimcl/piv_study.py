@@ -42,8 +42,6 @@ SCHEMA_VERSION = 1
 STUDY_RECORD = "study_scene"
 #: Folder of the PIV case files in a study directory.
 STUDY_FOLDER = "piv"
-#: PIV and PTV errors "agree" when their ratio lies within this factor either way.
-AGREEMENT_FACTOR = 2.0
 #: Per-vector arrays of a case (all of shape (rows, columns) of the final PIV grid).
 VECTOR_COLUMNS = (
     "x",
@@ -531,7 +529,7 @@ def is_current(path, record):
         return False
 
 
-def run_study_cases(scene, out_dir, record, *, force=False, report=None):
+def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None):
     """The PIV case files of a study: one per case, atomic and resumable.
 
     A case whose file :func:`is_current` is kept (unless ``force``); the others are
@@ -546,6 +544,8 @@ def run_study_cases(scene, out_dir, record, *, force=False, report=None):
         The study directory; files go to ``DIR/piv/<case>.h5``.
     record : dict
         What identifies the scene (stored in each file, compared on resume).
+    cases : list of (str, str or None)
+        ``(name, case argument)`` pairs (:func:`rimcl.study.study_cases`).
     force : bool
         Measure every case again.
     report : callable, optional
@@ -559,7 +559,6 @@ def run_study_cases(scene, out_dir, record, *, force=False, report=None):
         Cases measured in this call.
     """
     say = report or (lambda line: None)
-    names = scene["cases"]["names"]
     piv, configs = configs_from_scene(scene)
     folder = Path(out_dir) / STUDY_FOLDER
     try:
@@ -567,21 +566,26 @@ def run_study_cases(scene, out_dir, record, *, force=False, report=None):
     except OSError as exc:
         raise RimclError(f"cannot create {folder}: {exc.strerror}") from None
     paths, ran, reference = [], [], None
-    for index, name in enumerate(names, start=1):
+    for index, (name, argument) in enumerate(cases, start=1):
         path = study_case_path(out_dir, name)
         paths.append(path)
+        step = f"[PIV {index}/{len(cases)}] {name}"
         if not force and is_current(path, record):
-            say(f"[PIV {index}/{len(names)}] {name}: finished earlier, kept ({path})")
+            say(f"{step}: finished earlier, kept ({path})")
             continue
-        say(f"[PIV {index}/{len(names)}] {name}: imaging and correlating")
+        say(f"{step}: imaging and correlating")
         start = time.perf_counter()
         case = run_piv_case(
-            scene["field"]["path"] or None, case=name, piv=piv, reference=reference, **configs
+            scene["field"]["path"] or None,
+            case=argument,
+            piv=piv,
+            reference=reference,
+            **configs,
         )
         reference = case.reference
         write_piv_case(path, case, overwrite=True, record=record)
         ran.append(name)
-        say(f"[PIV {index}/{len(names)}] {name}: done in {time.perf_counter() - start:.1f} s")
+        say(f"{step}: done in {time.perf_counter() - start:.1f} s")
     return paths, ran
 
 
@@ -623,100 +627,3 @@ def add_study_results(stats, paths, figures_dir=None, config=None):
 
         write_piv_figures(cases, figures_dir, config=config, overwrite=True)
     return stats
-
-
-def _percent(value):
-    return "n/a" if value is None else f"{100 * value:.3g} %"
-
-
-def _number(value):
-    return "n/a" if value is None else f"{value:.3g}"
-
-
-def verdict(stats):
-    """One line: do PIV and PTV refraction errors of ``|u|`` agree, case by case?
-
-    They agree in a case when ``rms(ε_‖u‖)/rms(‖u‖)`` of PIV over that of PTV lies within
-    :data:`AGREEMENT_FACTOR` either way.
-    """
-    agree, differ = [], []
-    for case in stats["cases"]:
-        ratio = case.get("piv_vs_ptv", {}).get("magnitude", {}).get("ratio_rms_normalized")
-        if ratio is None:
-            continue
-        within = 1 / AGREEMENT_FACTOR <= ratio <= AGREEMENT_FACTOR
-        (agree if within else differ).append(f"{case['name']} ({ratio:.2g})")
-    if not agree and not differ:
-        return 'No PTV case to compare with (run.mode = "piv").'
-    factor = f"{AGREEMENT_FACTOR:g}"
-    if not differ:
-        return (
-            f"**Verdict: PIV and PTV agree** within a factor {factor} in every case "
-            f"(PIV/PTV of rms(ε_‖u‖)/rms(‖u‖)): {', '.join(agree)}."
-        )
-    if not agree:
-        return (
-            f"**Verdict: PIV and PTV differ** by more than a factor {factor}: {', '.join(differ)}."
-        )
-    return (
-        f"**Verdict: PIV and PTV agree** within a factor {factor} in {', '.join(agree)}, "
-        f"and **differ** in {', '.join(differ)} (PIV/PTV of rms(ε_‖u‖)/rms(‖u‖))."
-    )
-
-
-def summary_lines(stats):
-    """The PIV section of a study's ``summary.md`` (empty without PIV results).
-
-    Returns
-    -------
-    list of str
-        Markdown lines: what was measured, the per-case table beside PTV, the verdict.
-    """
-    cases = [case for case in stats["cases"] if "piv" in case]
-    if not cases:
-        return []
-    first = cases[0]["piv"]
-    settings = first["piv"]
-    lines = [
-        "",
-        "## PIV beside PTV",
-        "",
-        f"PIV frames of {first['n_tracers']} tracers across a Gaussian light sheet "
-        f"(pixel = {first['pixel_size_over_L']:.3g} L), Δt = {first['dt']:.3g}, "
-        f"{settings['passes']} passes down to {settings['window']} px windows "
-        f"(overlap {settings['overlap']:g}); cases in `piv/<case>.h5`, figures "
-        "`figures/piv_*`. Motion: " + first["motion"] + ".",
-        "",
-        "Refraction error of a vector: measured through the field minus measured through "
-        "a uniform medium on the same tracers (pixels, rms over the vectors used); *optics*: "
-        "the window average of the rays' image-point shifts; *baseline*: the uniform-medium "
-        "vector minus the window-averaged truth (the PIV method's own error). Relative "
-        "errors of `u3` as for PTV; `‖u‖` columns compare PIV and PTV (`stats.json`: "
-        "`piv`, `piv_vs_ptv` per case).",
-        "",
-        "| case | G | vectors used | truth rms (px) | refraction rms (px) | optics rms (px) "
-        "| baseline rms (px) | u3 systematic | u3 random | PIV rms(ε_‖u‖)/rms(‖u‖) "
-        "| PTV rms(ε_‖u‖)/rms(‖u‖) | PIV/PTV |",
-        "|" + "---|" * 12,
-    ]
-    for case in cases:
-        piv = case["piv"]
-        pixels = piv["displacement_px"]
-        compared = case.get("piv_vs_ptv", {}).get("magnitude", {})
-        row = [
-            case["name"],
-            _number(piv["G"]),
-            f"{piv['n_used']}/{piv['n_vectors']}",
-            _number(pixels["truth_rms"]),
-            _number(pixels["refraction_rms"]),
-            _number(pixels["optics_rms"]),
-            _number(pixels["baseline_rms"]),
-            _percent(piv["velocity"]["u3"]["systematic"]),
-            _percent(piv["velocity"]["u3"]["random"]),
-            _percent(piv["velocity"]["magnitude"]["rms_normalized"]),
-            _percent(compared.get("ptv_rms_normalized")),
-            _number(compared.get("ratio_rms_normalized")),
-        ]
-        lines.append("| " + " | ".join(row) + " |")
-    lines += ["", verdict(stats), ""]
-    return lines

@@ -5,14 +5,16 @@ A ray set is either the paper's fan (random tracers in the light sheet, each wit
 from a file. The output file holds one row per ray.
 """
 
+import warnings
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from rimcl.camera import PlaneCamera, Scene, seed_tracers
-from rimcl.errors import RimclError
+from rimcl.errors import RimclError, first_line
 from rimcl.field import AnalyticField
+from rimcl.memory import check_array_memory
 from rimcl.provenance import atomic_path, stamp_h5, to_json
 from rimcl.trace import STATUS_NAMES
 
@@ -52,9 +54,58 @@ def fan_rays(scene, tracers, fan, seed):
     return origins, directions, tracer_id
 
 
+#: Columns of a ray CSV file, as its optional header line names them.
+RAY_CSV_COLUMNS = ("x1", "x2", "x3", "d1", "d2", "d3")
+
+
+def _csv_rays(path):
+    """Rays of a CSV file: 6 columns, an optional header line naming them."""
+    with open(path, encoding="utf-8") as text:
+        first = text.readline()
+    header = tuple(cell.strip().lower() for cell in first.split(",")) == RAY_CSV_COLUMNS
+    try:
+        with warnings.catch_warnings():  # an empty file is reported below, as an error
+            warnings.simplefilter("ignore", UserWarning)
+            table = np.loadtxt(path, delimiter=",", comments="#", ndmin=2, skiprows=int(header))
+    except ValueError as exc:
+        raise RimclError(
+            f"{path}: a ray CSV holds 6 numbers a line, after an optional header line "
+            f"{','.join(RAY_CSV_COLUMNS)} ({first_line(exc)})"
+        ) from None
+    if table.size == 0:
+        raise RimclError(f"{path} holds no rays")
+    if table.shape[1] != len(RAY_CSV_COLUMNS):
+        raise RimclError(f"{path}: a ray CSV needs 6 columns {','.join(RAY_CSV_COLUMNS)}")
+    return {"origins": table[:, :3], "directions": table[:, 3:]}
+
+
+def _h5_rays(path):
+    from rimcl.flow.fieldfile import check_hdf5_object
+
+    arrays = {}
+    with h5py.File(path, "r") as data:
+        for name in ("origins", "directions"):
+            dataset = check_hdf5_object(path, data, name, "dataset")
+            if dataset is None:
+                continue
+            check_array_memory(dataset.shape, 8, f"reading {path}: {name}")
+            arrays[name] = dataset[()]
+    return arrays
+
+
+def _npz_rays(path):
+    from rimcl.flow.jhtdb import npz_array, open_npz
+
+    with open_npz(path) as data:
+        return {
+            name: npz_array(data, path, name) for name in ("origins", "directions") if name in data
+        }
+
+
 def read_rays(path):
     """Rays from a file: ``.npz`` or HDF5 with arrays ``origins`` and ``directions``
-    (``(N, 3)``, ``x1, x2, x3``), or ``.csv`` with columns ``x1,x2,x3,d1,d2,d3``.
+    (``(N, 3)``, ``x1, x2, x3``), or ``.csv`` with columns ``x1,x2,x3,d1,d2,d3`` (the first
+    line may be that header).
 
     Returns
     -------
@@ -64,26 +115,25 @@ def read_rays(path):
     if not path.is_file():
         raise RimclError(f"ray file {path} does not exist")
     suffix = path.suffix.lower()
+    readers = {".npz": _npz_rays, ".csv": _csv_rays}
     try:
-        if suffix == ".npz":
-            with np.load(path) as data:
-                arrays = {name: data[name] for name in ("origins", "directions") if name in data}
-        elif suffix == ".csv":
-            table = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
-            if table.shape[1] != 6:
-                raise RimclError(f"{path}: a ray CSV needs 6 columns x1,x2,x3,d1,d2,d3")
-            arrays = {"origins": table[:, :3], "directions": table[:, 3:]}
-        else:
-            with h5py.File(path, "r") as data:
-                arrays = {
-                    name: data[name][()] for name in ("origins", "directions") if name in data
-                }
-    except (OSError, ValueError) as exc:
-        raise RimclError(f"cannot read rays from {path}: {exc}") from None
+        arrays = readers.get(suffix, _h5_rays)(path)
+    except RimclError:
+        raise
+    except Exception as exc:  # text, zip and HDF5 errors of a damaged or foreign file
+        raise RimclError(f"cannot read rays from {path}: {first_line(exc)}") from None
     missing = {"origins", "directions"} - set(arrays)
     if missing:
         raise RimclError(f"{path} lacks {', '.join(sorted(missing))}")
-    return np.asarray(arrays["origins"], float), np.asarray(arrays["directions"], float)
+    rays = []
+    for name in ("origins", "directions"):
+        values = np.asarray(arrays[name])
+        if values.dtype.kind not in "fiu":
+            raise RimclError(f"{path}: {name} must hold real numbers, got {values.dtype}")
+        if values.ndim != 2 or values.shape[1] != 3:
+            raise RimclError(f"{path}: {name} must have shape (N, 3), got {values.shape}")
+        rays.append(values.astype(np.float64))
+    return tuple(rays)
 
 
 def write_trace(path, result, config, device=None, tracer_id=None, overwrite=False):

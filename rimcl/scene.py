@@ -950,9 +950,13 @@ def load_scene(path=None, overrides=None, preset=None):
         path = Path(path)
         where = str(path)
         try:
-            text = path.read_text()
+            text = path.read_text(encoding="utf-8")
         except OSError as exc:
             raise RimclError(f"cannot read scene file {path}: {exc.strerror}") from None
+        except UnicodeDecodeError:
+            raise RimclError(
+                f"scene file {path} is not text (a TOML scene is UTF-8 text)"
+            ) from None
         try:
             from_file = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:

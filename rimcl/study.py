@@ -2,10 +2,16 @@
 
 A study directory holds:
 
-- ``scene.toml``: the scene actually used (written first; a rerun with another scene is
-  refused unless ``force``);
+- ``.rimcl-study``: the marker that rimcl's study made this directory (a directory holding
+  a ``summary.md`` or ``stats.json`` without it is refused, never overwritten); also the
+  lock that keeps a second study from running in the same directory at once;
+- ``scene.toml``: the scene of the case files, written once the scene has proven itself
+  (its first case measured, or its finished cases checked), never by a run that failed
+  before; a rerun with another scene is refused unless ``force``;
 - ``cases/<case>.h5``: one ``rimcl render`` file per case, written atomically when the
-  case is finished; a rerun skips the cases whose file exists;
+  case is finished, recording the study's scene. A rerun keeps a case file only after
+  :func:`check_case_file` found it readable, complete and made for this scene; anything
+  else is measured again, with one line saying why;
 - ``piv/<case>.h5`` with ``run.mode = "piv"`` or ``"both"``: the PIV errors of each case
   (:mod:`rimcl.piv_study`), kept on a rerun when complete and of the same scene;
 - ``stats.json`` and ``figures/``: statistics and figures of all cases (:mod:`rimcl.stats`,
@@ -14,60 +20,42 @@ A study directory holds:
   Written last, so its presence (newer than every case file) means the study is complete
   and a rerun only reads ``stats.json``.
 
+``stats.json``, ``figures/`` and ``summary.md`` always come from case files of the scene
+in ``scene.toml``: when a forced run changes the scene, they are removed before the new
+``scene.toml`` is written. Partial files (``.<name>.<random>.part``) left by a killed run
+are removed by the next one.
+
 Every case uses the same tracers, rays and random numbers (common random numbers), so
 case-to-case differences are not noise; the reference images (through a uniform medium)
 are computed once and reused.
 """
 
+import contextlib
 import dataclasses
 import json
+import re
+import shutil
 import time
-from datetime import datetime, timezone
 from pathlib import Path
 
 from rimcl import __version__
-from rimcl.config import MeasureConfig
-from rimcl.errors import RimclError
+from rimcl.config import DEFAULT_PSF_SIGMA, MeasureConfig
+from rimcl.errors import RimclError, first_line
 from rimcl.provenance import atomic_path
 from rimcl.scene import load_scene, scene_text
+from rimcl.summary import summary_markdown
 
 #: Scene keys that do not change the measurement: a study may resume with other values.
 RUN_ONLY_KEYS = (("run", "device"), ("run", "rays_per_batch"), ("run", "mode"))
-
-PAPER_SOURCE = (
-    "H. Li, A. Fischer, M. Avila, D. Xu, *Measurement error of tracer-based velocimetry in "
-    "single-phase turbulent flows with inhomogeneous refractive indices*"
-)
-#: The paper's values for air (C1) and water (C4), as its text states them, with where.
-#: Relative errors in percent; the position error is an order of magnitude only.
-PAPER_VALUES = {
-    "C1": {
-        "fluid": "air",
-        "delta_n_max": "2.40e-5",
-        "position_peak_over_L": "O(1e-4)",
-        "velocity_systematic": "≈ 0.2 %",
-        "velocity_random": "≈ 2 %",
-        "acceleration_systematic": "≈ 1 %",
-        "acceleration_random": "≈ 300 %",
-    },
-    "C4": {
-        "fluid": "water",
-        "delta_n_max": "2.85e-2",
-        "position_peak_over_L": "O(1e-2)",
-        "velocity_systematic": "≈ 10 %",
-        "velocity_random": "≈ 2000 %",
-        "acceleration_systematic": "≈ 500 %",
-        "acceleration_random": "≈ 1e5 %",
-    },
-}
-PAPER_CITATIONS = (
-    "Δn_max: Table 2 (tab:cases). Position error: Sec. 4.2 (sec:position), 'for the air "
-    "flow (C1), the magnitudes of position error are up to O(10^-4 L) ... for the water "
-    "flow (C4) ... O(10^-2 L)'. Velocity: Sec. 4.3 (sec:velocity), mean and standard "
-    "deviation of ε_u3/u3, 'approximately 0.2 % and about 2 %' (air), '10 %' and 'about "
-    "2000 %' (water). Acceleration: Sec. 4.4 (sec:acceleration), 'about 1 % and 300 %' "
-    "(air), 'about 500 % and 10^5 %' (water); also the Conclusions."
-)
+#: File that marks a directory as a rimcl study (and is locked while a study runs in it).
+MARKER = ".rimcl-study"
+#: Key of a case file's recorded configuration holding the study's scene.
+SCENE_RECORD = "study_scene"
+#: Name of the one case of a field file that stores δn (its own refractive index).
+DELTA_N_CASE = "delta_n"
+#: Frames every study case images (positions, velocity, acceleration).
+# a partial file of rimcl.provenance.atomic_path: "." + name + "." + 8 random chars + ".part"
+_PART_FILE = re.compile(r"^\..+\.[A-Za-z0-9_]{8}\.part$")
 
 
 @dataclasses.dataclass
@@ -100,30 +88,36 @@ class StudyResult:
 def _comparable(scene):
     trimmed = json.loads(json.dumps(scene))
     for section, name in RUN_ONLY_KEYS:
-        trimmed[section].pop(name, None)
+        trimmed.get(section, {}).pop(name, None)
     return trimmed
 
 
 def _differences(old, new):
     return [
-        f"{section}.{name}: {old[section].get(name)!r} -> {value!r}"
+        f"{section}.{name}: {old.get(section, {}).get(name)!r} -> {value!r}"
         for section, table in new.items()
         for name, value in table.items()
         if old.get(section, {}).get(name) != value
     ]
 
 
-def _check_directory(out_dir, scene, force):
-    """Create the directory; refuse to mix the results of two different scenes."""
+def _read_scene_file(scene_path):
+    """The scene recorded in a study directory; a damaged file is one line of error."""
     try:
-        (out_dir / "cases").mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise RimclError(f"cannot create study directory {out_dir}: {exc.strerror}") from None
+        return load_scene(scene_path)
+    except (RimclError, ValueError) as exc:  # ValueError: not text at all
+        raise RimclError(
+            f"{scene_path} is damaged ({exc}); use --force to redo the study, or another --out"
+        ) from None
+
+
+def _check_directory(out_dir, scene, force):
+    """Refuse to mix the results of two different scenes (the directory exists)."""
     scene_path = out_dir / "scene.toml"
     if force:
         return
     if scene_path.exists():
-        previous = _comparable(load_scene(scene_path))
+        previous = _comparable(_read_scene_file(scene_path))
         changes = _differences(previous, _comparable(scene))
         if changes:
             raise RimclError(
@@ -137,6 +131,60 @@ def _check_directory(out_dir, scene, force):
         )
 
 
+def _written_by_a_study(out_dir):
+    """Whether an unmarked directory's stats.json is a study's (rimcl before the marker)."""
+    try:
+        stats = json.loads((out_dir / "stats.json").read_text())
+        config = stats["config"]
+        return "study_dir" in config and "scene" in config and (out_dir / "scene.toml").exists()
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+
+
+@contextlib.contextmanager
+def _claimed(out_dir):
+    """Create (or adopt) a study directory and hold its lock while a study runs in it."""
+    marker = out_dir / MARKER
+    foreign = [name for name in ("summary.md", "stats.json") if (out_dir / name).exists()]
+    if foreign and not marker.exists() and not _written_by_a_study(out_dir):
+        raise RimclError(
+            f"{out_dir} holds {' and '.join(foreign)} that rimcl study did not write "
+            f"(no {MARKER} marker); choose another --out, or move them away"
+        )
+    try:
+        (out_dir / "cases").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RimclError(f"cannot create study directory {out_dir}: {exc.strerror}") from None
+    if not marker.exists():
+        _write_text(marker, json.dumps({"rimcl_study": 1, "created_by": f"rimcl {__version__}"}))
+    with open(marker, "rb") as handle:
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - not on POSIX: no lock
+            fcntl = None
+        if fcntl is not None:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                raise RimclError(
+                    f"another rimcl study is running in {out_dir}; wait for it or use another --out"
+                ) from None
+        yield
+
+
+def _remove_stale_parts(out_dir):
+    """Remove the partial files a killed run left; returns how many."""
+    removed = 0
+    for folder in (out_dir, out_dir / "cases", out_dir / "figures", out_dir / "piv"):
+        if not folder.is_dir():
+            continue
+        for path in folder.iterdir():
+            if _PART_FILE.match(path.name) and path.is_file():
+                path.unlink()
+                removed += 1
+    return removed
+
+
 def _write_text(path, text):
     with atomic_path(path, overwrite=True) as tmp:
         Path(tmp).write_text(text)
@@ -145,6 +193,84 @@ def _write_text(path, text):
 def case_path(out_dir, case):
     """Render file of one case in a study directory."""
     return Path(out_dir) / "cases" / f"{case}.h5"
+
+
+def study_cases(scene):
+    """The cases a study of ``scene`` measures: ``(name, case argument)`` pairs.
+
+    A field file that stores ``delta_n`` carries its own refractive index: its study has
+    one case, :data:`DELTA_N_CASE`, whatever ``cases.names`` says.
+
+    Returns
+    -------
+    list of (str, str or None)
+    """
+    from rimcl.flow import sample_path
+    from rimcl.flow.fieldfile import field_kind
+
+    if field_kind(scene["field"]["path"] or sample_path()) == "delta_n":
+        return [(DELTA_N_CASE, None)]
+    return [(name, name) for name in scene["cases"]["names"]]
+
+
+def check_case_file(path, scene, case):
+    """Why a study's case file cannot be kept for ``scene``, or None if it can.
+
+    A case file is kept only if it is a readable render file of ``case`` with every group
+    and the row counts of the scene's tracers, and its recorded scene equals ``scene``
+    in every key that changes the measurement (:data:`RUN_ONLY_KEYS` may differ).
+
+    Parameters
+    ----------
+    path : str or Path
+    scene : dict
+        A complete scene.
+    case : str
+        The case name the file must hold.
+
+    Returns
+    -------
+    str or None
+        One line saying why the file must be measured again.
+    """
+    from rimcl.stats import load_render
+
+    path = Path(path)
+    try:
+        tables = load_render(path)
+    except RimclError as exc:
+        return f"unreadable or incomplete ({exc})"
+    except Exception as exc:  # whatever h5py raises for a damaged file
+        return f"damaged ({type(exc).__name__}: {first_line(exc)})"
+    if tables.case != case:
+        return f"holds case {tables.case!r}, not {case!r}"
+    recorded = tables.provenance.get("config", {}).get(SCENE_RECORD)
+    if not isinstance(recorded, dict):
+        return "records no study scene (written by rimcl render or an older rimcl)"
+    changes = _differences(recorded, _comparable(scene))
+    if changes:
+        shown = "; ".join(changes[:3]) + ("; ..." if len(changes) > 3 else "")
+        return f"made for another scene ({shown})"
+    for group, wanted in expected_rows(scene).items():
+        table = getattr(tables, group) or {}
+        found = len(table["id"]) if "id" in table else 0
+        if found != wanted:
+            return f"incomplete ({group} has {found} rows, the scene needs {wanted})"
+    return None
+
+
+def expected_rows(scene):
+    """Rows of each table of a complete case file of ``scene`` (0: no such table)."""
+    count, frames = scene["tracers"]["count"], scene["time"]["frames"]
+    window = scene["time"]["fit_window"]
+    fitted = count * (frames - window + 1) if frames >= window else 0
+    return {
+        "tracers": count * frames,
+        "velocity": count * (frames - 1),
+        "acceleration": count * max(frames - 2, 0),
+        "velocity_fit": fitted,
+        "acceleration_fit": fitted,
+    }
 
 
 def _up_to_date(out_dir, case_files, figures, mode="ptv"):
@@ -162,6 +288,66 @@ def _up_to_date(out_dir, case_files, figures, mode="ptv"):
         return False
     inputs = [out_dir / "scene.toml", *case_files]
     return summary.stat().st_mtime >= max(path.stat().st_mtime for path in inputs)
+
+
+def _check_resources(scene):
+    """Refuse, before anything is written, a scene whose geometry does not fit its field
+    or whose sizes do not fit in memory."""
+    from rimcl.camera import Scene
+    from rimcl.device import select_device
+    from rimcl.flow import sample_path
+    from rimcl.flow.fieldfile import FieldFile
+    from rimcl.memory import check_render_request
+
+    field = scene["field"]
+    with FieldFile(field["path"] or sample_path()) as source:
+        Scene.from_grid(
+            source.origin,
+            source.spacing,
+            source.shape,
+            source.boundary,
+            field["x_sheet"],
+            field["depth"],
+        )
+    camera, renderer = scene["camera"], scene["renderer"]
+    check_render_request(
+        scene["field"]["path"] or None,
+        tracers=scene["tracers"]["count"],
+        camera=camera["kind"],
+        fan=camera["fan"],
+        pupil_rays=camera["pupil_rays"],
+        rays_per_batch=scene["run"]["rays_per_batch"],
+        frames=scene["time"]["frames"],
+        max_window=renderer["max_window"],
+        pixels=renderer["pixels"],
+        psf_sigma=renderer["psf_sigma"] or DEFAULT_PSF_SIGMA,
+        interp=scene["integrator"]["interp"],
+        device=select_device(scene["run"]["device"] or None),
+    )
+
+
+class _SceneFile:
+    """Writes ``scene.toml`` once the scene has proven itself, retiring the statistics of
+    another scene first."""
+
+    def __init__(self, out_dir, scene):
+        self.path, self.scene = out_dir / "scene.toml", scene
+        self.text = scene_text(scene)
+
+    def settle(self):
+        """Make ``scene.toml`` this scene's (before a case file or statistics of it land)."""
+        if self.path.exists() and self.path.read_text() == self.text:
+            return
+        previous = None
+        if self.path.exists():
+            with contextlib.suppress(RimclError):
+                previous = _comparable(_read_scene_file(self.path))
+        if previous != _comparable(self.scene):
+            # statistics and figures of another scene's case files: never beside this one
+            for name in ("summary.md", "stats.json"):
+                (self.path.parent / name).unlink(missing_ok=True)
+            shutil.rmtree(self.path.parent / "figures", ignore_errors=True)
+        _write_text(self.path, self.text)
 
 
 def run_study(scene, out_dir, *, force=False, figures=True, progress=False, report=None):
@@ -189,62 +375,75 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
     Raises
     ------
     RimclError
-        For a directory holding another scene's study, an unusable field or device, and
-        every error of the measurement.
+        For a directory holding another scene's study or files rimcl did not write, a
+        study already running there, an unusable field or device, a scene that cannot fit
+        in memory, and every error of the measurement.
     """
     from rimcl.measure import run_render, write_render
 
     started = time.perf_counter()
     say = report or (lambda line: None)
     out_dir = Path(out_dir)
-    _check_directory(out_dir, scene, force)
-    scene_path, text = out_dir / "scene.toml", scene_text(scene)
-    if not scene_path.exists() or scene_path.read_text() != text:
-        _write_text(scene_path, text)
     mode = scene["run"]["mode"]
-    names = scene["cases"]["names"] if mode != "piv" else []
-    ran, skipped, seconds = [], [], {}
-    references = {}  # threshold -> reference images (they depend on it, not on the case)
-    for index, name in enumerate(names, start=1):
-        path = case_path(out_dir, name)
-        if path.exists() and not force:
-            skipped.append(name)
-            say(f"[{index}/{len(names)}] {name}: finished earlier, kept ({path})")
-            continue
-        say(f"[{index}/{len(names)}] {name}: measuring")
-        case_start = time.perf_counter()
-        config = MeasureConfig.from_scene(scene, name)
-        threshold = config.renderer.threshold
-        result = run_render(
-            scene["field"]["path"] or None,
-            case=name,
-            config=config,
-            reference=references.get(threshold),
-            progress=progress,
-        )
-        references[threshold] = result.reference
-        write_render(path, result, overwrite=True)
-        seconds[name] = time.perf_counter() - case_start
-        ran.append(name)
-        say(f"[{index}/{len(names)}] {name}: done in {seconds[name]:.1f} s")
-    piv_files = []
-    if mode != "ptv":
-        from rimcl.piv_study import run_study_cases
+    all_cases = study_cases(scene)
+    cases = all_cases if mode != "piv" else []
+    _check_resources(scene)
+    with _claimed(out_dir):
+        removed = _remove_stale_parts(out_dir)
+        if removed:
+            say(f"removed {removed} partial file(s) left by an interrupted run")
+        _check_directory(out_dir, scene, force)
+        if all_cases[0][0] == DELTA_N_CASE:
+            say(f"{scene['field']['path']} stores delta_n: one case, its own index")
+        scene_file = _SceneFile(out_dir, scene)
+        ran, skipped, seconds = [], [], {}
+        references = {}  # threshold -> reference images (they depend on it, not on the case)
+        for index, (name, case) in enumerate(cases, start=1):
+            path = case_path(out_dir, name)
+            step = f"[{index}/{len(cases)}] {name}"
+            reason = None if force or not path.exists() else check_case_file(path, scene, name)
+            if path.exists() and not force and reason is None:
+                skipped.append(name)
+                say(f"{step}: finished earlier, kept ({path})")
+                continue
+            say(f"{step}: " + (f"{path.name} {reason}; measuring again" if reason else "measuring"))
+            case_start = time.perf_counter()
+            config = MeasureConfig.from_scene(scene, name)
+            threshold = config.renderer.threshold
+            result = run_render(
+                scene["field"]["path"] or None,
+                case=case,
+                config=config,
+                reference=references.get(threshold),
+                progress=progress,
+            )
+            references[threshold] = result.reference
+            result.config[SCENE_RECORD] = _comparable(scene)
+            scene_file.settle()
+            write_render(path, result, overwrite=True)
+            seconds[name] = time.perf_counter() - case_start
+            ran.append(name)
+            say(f"{step}: done in {seconds[name]:.1f} s")
+        scene_file.settle()
+        piv_files = []
+        if mode != "ptv":
+            from rimcl.piv_study import run_study_cases
 
-        piv_files, piv_ran = run_study_cases(
-            scene, out_dir, _comparable(scene), force=force, report=say
-        )
-        ran += [f"piv/{name}" for name in piv_ran]
-        skipped += [f"piv/{name}" for name in scene["cases"]["names"] if name not in piv_ran]
-    case_files = [case_path(out_dir, name) for name in names]
-    if not force and not ran and _up_to_date(out_dir, case_files + piv_files, figures, mode):
-        say("statistics, figures and summary are up to date")
-        stats = json.loads((out_dir / "stats.json").read_text())
-        return StudyResult(
-            out_dir, stats, ran, skipped, seconds, False, time.perf_counter() - started
-        )
-    say("statistics and figures" if figures else "statistics")
-    stats = write_study_outputs(out_dir, scene, case_files, figures, piv_files)
+            piv_files, piv_ran = run_study_cases(
+                scene, out_dir, _comparable(scene), all_cases, force=force, report=say
+            )
+            ran += [f"piv/{name}" for name in piv_ran]
+            skipped += [f"piv/{name}" for name, _ in all_cases if name not in piv_ran]
+        case_files = [case_path(out_dir, name) for name, _ in cases]
+        if not force and not ran and _up_to_date(out_dir, case_files + piv_files, figures, mode):
+            with contextlib.suppress(OSError, ValueError):
+                stats = json.loads((out_dir / "stats.json").read_text())
+                say("statistics, figures and summary are up to date")
+                return StudyResult(
+                    out_dir, stats, ran, skipped, seconds, False, time.perf_counter() - started
+                )
+        say("statistics and figures" if figures else "statistics")
+        stats = write_study_outputs(out_dir, scene, case_files, figures, piv_files)
     return StudyResult(out_dir, stats, ran, skipped, seconds, True, time.perf_counter() - started)
 
 
@@ -280,183 +479,3 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
     write_json(out_dir / "stats.json", stats, overwrite=True)
     _write_text(out_dir / "summary.md", summary_markdown(stats, scene))
     return stats
-
-
-def _percent(value):
-    return "n/a" if value is None else f"{100 * value:.3g} %"
-
-
-def _number(value):
-    return "n/a" if value is None else f"{value:.3g}"
-
-
-def _case_row(case):
-    velocity, acceleration = case["velocity"]["u3"], case["acceleration"]["a3"]
-    return [
-        case["name"],
-        _number(case["G"]),
-        _number(case["delta_n_max"]),
-        f"{case['n_used']}/{case['n_tracers']}",
-        _number(case["position_error_peak_over_L"]),
-        _percent(velocity["systematic"]),
-        _percent(velocity["random"]),
-        _percent(acceleration["systematic"]),
-        _percent(acceleration["random"]),
-    ]
-
-
-def _table(header, rows):
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return lines
-
-
-def summary_markdown(stats, scene):
-    """The study's summary table as Markdown, beside the paper's values for air and water.
-
-    Parameters
-    ----------
-    stats : dict
-        The ``stats.json`` document.
-    scene : dict
-        The scene of the study.
-
-    Returns
-    -------
-    str
-    """
-    if scene["run"]["mode"] == "piv":
-        from rimcl.piv_study import summary_lines
-
-        title = f"# rimcl study: {len(stats['cases'])} cases, PIV (rimcl {__version__})"
-        return "\n".join([title, *summary_lines(stats)])
-    cases = stats["cases"]
-    first = cases[0]
-    camera = scene["camera"]
-    rays = (
-        f"plane camera, {camera['fan']}×{camera['fan']} rays per tracer"
-        if camera["kind"] == "plane"
-        else f"pupil camera, {camera['pupil_rays']} rays per tracer"
-    )
-    field = scene["field"]["path"] or "the shipped 64³ sample (buoyancy-driven mixing)"
-    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    devices = ", ".join(
-        sorted({str(entry.get("device", {}).get("device")) for entry in stats["config"]["inputs"]})
-    )
-    lines = [
-        f"# rimcl study: {len(cases)} cases",
-        "",
-        f"rimcl {__version__}, {stamp}. Field: {field}. {scene['tracers']['count']} tracers, "
-        f"{rays}, {scene['renderer']['kind']} renderer, {scene['renderer']['pixels']} pixels "
-        f"across the field of view (pixel = {first['pixel_size_over_L']:.3g} L), "
-        f"L = {first['length_L']:.4g}, Δt = {first['dt']:.3g}.",
-        f"Device: {devices}. Configuration: `scene.toml`; every number and the software "
-        "versions: `stats.json`; figures with their data: `figures/`.",
-        "",
-        "## Results",
-        "",
-        "Errors from refraction only: position `ε_x = x' − x^ref`, velocity "
-        "`ε_u = u' − u^ref`, acceleration `ε_a = a' − a^ref` (measured through the field "
-        "minus measured through a uniform medium). *Systematic* = mean of `ε/truth`, "
-        "*random* = its standard deviation (the paper's definitions), for the `x3` "
-        "components, in percent (`stats.json` holds fractions).",
-        "",
-    ]
-    header = [
-        "case",
-        "G = Kρ",
-        "Δn_max",
-        "tracers used",
-        "position-error peak / L",
-        "u3 systematic",
-        "u3 random",
-        "a3 systematic",
-        "a3 random",
-    ]
-    lines += _table(header, [_case_row(case) for case in cases])
-    lines += [
-        "",
-        "The random errors are standard deviations of ratios whose denominators come "
-        "close to zero for some tracers: they are dominated by the few slowest tracers. "
-        "The robust companions below do not have that weakness. Where `rms(ε_u)/rms(u)` "
-        "grows more slowly than G, the velocity error is mostly the rounding noise of the "
-        "10-bit images (a few 1e-4 px per frame), not refraction. *Baseline* is the error "
-        "of finite differences and rendering without refraction (`u^ref − u`, "
-        "`a^ref − a`), which every PTV measurement has.",
-        "",
-    ]
-    header = [
-        "case",
-        "u3: median, IQR",
-        "rms(ε_u)/rms(u)",
-        "baseline rms(ε_u)/rms(u)",
-        "a3: median, IQR",
-        "rms(ε_a)/rms(a)",
-        "baseline rms(ε_a)/rms(a)",
-    ]
-    rows = []
-    for case in cases:
-        u3, a3 = case["velocity"]["u3"], case["acceleration"]["a3"]
-        rows.append(
-            [
-                case["name"],
-                f"{_percent(u3['median'])}, {_percent(u3['iqr'])}",
-                _percent(u3["rms_normalized"]),
-                _percent(case["baseline"]["velocity"]["u3"]["rms_normalized"]),
-                f"{_percent(a3['median'])}, {_percent(a3['iqr'])}",
-                _percent(a3["rms_normalized"]),
-                _percent(case["baseline"]["acceleration"]["a3"]["rms_normalized"]),
-            ]
-        )
-    lines += _table(header, rows)
-    excluded = [
-        f"{case['name']}: "
-        + (", ".join(f"{n} {name}" for name, n in case["n_excluded"].items() if n) or "none")
-        for case in cases
-    ]
-    lines += ["", "Tracers left out (a tracer may carry several flags): " + "; ".join(excluded)]
-    lines += [
-        "",
-        "## Against the paper (air C1, water C4)",
-        "",
-        "**The flows differ.** The paper traced a 1024³ JHTDB direct numerical simulation "
-        "of homogeneous buoyancy-driven turbulence (Re = 12500) over its own depth L, with "
-        "1e5 tracers, 100×100 rays each and 8192² pixels; this study uses the field, depth "
-        "and sizes above. Only orders of magnitude and trends with G can agree; no "
-        "agreement of the numbers themselves is expected.",
-        "",
-    ]
-    by_name = {case["name"]: case for case in cases}
-    header = [
-        "",
-        "Δn_max",
-        "position-error peak / L",
-        "velocity systematic",
-        "velocity random",
-        "acceleration systematic",
-        "acceleration random",
-    ]
-    rows = []
-    for name, paper in PAPER_VALUES.items():
-        rows.append(
-            [
-                f"paper, {paper['fluid']} ({name})",
-                paper["delta_n_max"],
-                paper["position_peak_over_L"],
-                paper["velocity_systematic"],
-                paper["velocity_random"],
-                paper["acceleration_systematic"],
-                paper["acceleration_random"],
-            ]
-        )
-        case = by_name.get(name)
-        if case is None:
-            rows.append([f"rimcl, {name}", *["not run"] * 6])
-        else:
-            row = _case_row(case)
-            rows.append([f"rimcl, {name}", row[2], row[4], *row[5:]])
-    lines += _table(header, rows)
-    lines += ["", f"Paper: {PAPER_SOURCE}. Where: {PAPER_CITATIONS}", ""]
-    from rimcl.piv_study import summary_lines
-
-    return "\n".join(lines + summary_lines(stats))

@@ -795,25 +795,33 @@ def _finish(origins, directions, raw_out, info, step, config):
     end_pos = join_pairs(raw_out[:, 0:3], raw_out[:, 3:6])
     end_t = join_pairs(raw_out[:, 6:9], raw_out[:, 9:12])
     status = info[:, 1].astype(np.int8)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         end_dir = end_t / np.linalg.norm(end_t, axis=1, keepdims=True)
-        ok = status == 0
         distance = (end_pos[:, 0] - origins[:, 0]) / end_dir[:, 0]
         image_pos = end_pos - distance[:, None] * end_dir
         image_pos[:, 0] = origins[:, 0]
-        image_pos[~ok] = np.nan
         path_length = raw_out[:, 12].astype(np.float64)
+        optical_path = raw_out[:, 13].astype(np.float64)
         n_metric = raw_out[:, 14:17].astype(np.float64) / path_length[:, None]
+        deflection = angle_between(directions, end_dir)
+        deflection_angles = direction_angles(end_dir) - direction_angles(directions)
+    # a ray that reached the exit plane with outputs that overflowed (an absurd grid
+    # spacing, say) is not a measurement: it counts as non_finite, never as ok
+    finite = np.all(np.isfinite(np.hstack([image_pos, end_pos, end_dir, deflection_angles])), 1)
+    finite &= np.isfinite(deflection) & np.isfinite(path_length) & np.isfinite(optical_path)
+    finite &= np.all(np.isfinite(n_metric), axis=1) | (path_length == 0)
+    status[(status == 0) & ~finite] = STATUS_NAMES.index("non_finite")
+    image_pos[status != 0] = np.nan
     return TraceResult(
         origins=origins,
         directions=directions,
         image_pos=image_pos,
         end_pos=end_pos,
         end_dir=end_dir,
-        deflection=angle_between(directions, end_dir),
-        deflection_angles=direction_angles(end_dir) - direction_angles(directions),
+        deflection=deflection,
+        deflection_angles=deflection_angles,
         path_length=path_length,
-        optical_path=raw_out[:, 13].astype(np.float64),
+        optical_path=optical_path,
         n_metric=n_metric,
         steps=info[:, 0].astype(np.int64),
         status=status,

@@ -80,7 +80,6 @@ def test_existing_output_is_kept_without_overwrite(box, device, tmp_path):
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
-        (["--tracers", "0"], "at least 1"),
         (
             [
                 "--camera",

@@ -35,7 +35,7 @@ def test_group_lists_its_subcommands():
 
 
 def test_info_on_the_sample_reports_grid_frames_and_delta_n_per_case():
-    result = _run("info", "--json")
+    result = _run("info", "--json", "--values")
     assert result.exit_code == 0, result.output
     info = json.loads(result.output)
     with FieldFile(sample_path()) as ff:
@@ -50,7 +50,7 @@ def test_info_on_the_sample_reports_grid_frames_and_delta_n_per_case():
         entry = info["delta_n_max"][name]
         assert entry["delta_n_max"] == pytest.approx(g * float(spread), rel=1e-6)
         assert entry["paper"] == PAPER_DELTA_N_MAX[name]
-    text = _run("info").output
+    text = _run("info", "--values").output
     assert "64 x 64 x 64" in text and "C4" in text and "water" in text
 
 

@@ -1,14 +1,24 @@
-"""Figures: every file written, labelled axes, and the numbers beside them match stats."""
+"""Figures: every file written, labelled axes, nothing cut or overlapping, numbers = stats."""
 
 import io
 import json
 
+import h5py
 import numpy as np
 import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from PIL import Image
+from synthetic_budget import write_budget_file
 from synthetic_render import write_render_file
 
-from rimcl.figures import FIGURE_NAMES, draw_figure, write_figures
+from rimcl.figures import (
+    FIGURE_NAMES,
+    LITERATURE_STUDIES,
+    draw_dt_sweep,
+    draw_figure,
+    write_dt_sweep_figure,
+    write_figures,
+)
 from rimcl.stats import compute_stats, load_render
 
 CASES = (
@@ -24,8 +34,10 @@ def study(tmp_path_factory):
     tables = []
     for name, g, position, bias, spread in CASES:
         path = folder / f"{name}.h5"
-        write_render_file(
+        write_budget_file(
             path,
+            optics_share=0.3,
+            fit_frames=3 if g > 0 else None,
             case=name,
             k_rho=g,
             n_tracers=120,
@@ -40,11 +52,68 @@ def study(tmp_path_factory):
     return tables, compute_stats(tables), folder
 
 
+def drawn_texts(figure, renderer):
+    """``(what, window extent)`` of every text drawn: titles, labels, drawn tick labels,
+    axes texts, legends, the suptitle and figure legends."""
+    found = []
+
+    def add(text, name):
+        if text.get_visible() and text.get_text().strip():
+            found.append((name, text.get_window_extent(renderer)))
+
+    if figure._suptitle is not None:
+        add(figure._suptitle, "suptitle")
+    found += [("figure legend", legend.get_window_extent(renderer)) for legend in figure.legends]
+    for index, ax in enumerate(figure.axes):
+        if not ax.axison:
+            continue
+        where = f"axes {index} {ax.get_title(loc='left')[:25]!r}"
+        add(ax._left_title, f"{where} title")
+        add(ax.title, f"{where} centre title")
+        for axis in (ax.xaxis, ax.yaxis):
+            add(axis.label, f"{where} {axis.axis_name}label")
+            for tick in axis._update_ticks():
+                add(tick.label1, f"{where} tick {tick.label1.get_text()!r}")
+        if ax.get_legend() is not None:
+            found.append((f"{where} legend", ax.get_legend().get_window_extent(renderer)))
+        for text in ax.texts:
+            add(text, f"{where} text")
+    return found
+
+
+def layout_problems(figure):
+    """Text outside the figure, titles wider than their panel, text within 2 px of text."""
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    box = figure.bbox
+    texts = drawn_texts(figure, renderer)
+    problems = [
+        f"cut: {name}"
+        for name, e in texts
+        if e.x0 < box.x0 - 1 or e.x1 > box.x1 + 1 or e.y0 < box.y0 - 1 or e.y1 > box.y1 + 1
+    ]
+    problems += [
+        f"title wider than its panel: {ax.get_title(loc='left')[:30]!r}"
+        for ax in figure.axes
+        if ax.axison
+        and ax.get_title(loc="left")
+        and ax._left_title.get_window_extent(renderer).x1 > ax.bbox.x1 + 2
+    ]
+    for i, (name_a, a) in enumerate(texts):
+        problems += [
+            f"overlap: {name_a} / {name_b}"
+            for name_b, b in texts[i + 1 :]
+            if a.padded(2).overlaps(b)
+        ]
+    return problems
+
+
 def test_every_figure_is_written_with_metadata_and_its_numbers(study):
     tables, stats, folder = study
     out = folder / "out"
     written = write_figures(tables, stats, out)
-    assert len(written) == 3 * len(FIGURE_NAMES) >= 18
+    assert len(written) == 3 * len(FIGURE_NAMES) >= 27
     for name in FIGURE_NAMES:
         with Image.open(out / f"{name}.png") as png:
             assert png.text["Software"].startswith("rimcl")
@@ -57,7 +126,7 @@ def test_every_figure_is_written_with_metadata_and_its_numbers(study):
 
 
 @pytest.mark.parametrize("name", FIGURE_NAMES)
-def test_every_panel_has_labelled_axes(study, name):
+def test_every_panel_is_labelled_and_nothing_is_cut_or_overlaps(study, name):
     tables, stats, _ = study
     figure, _ = draw_figure(name, tables, stats)
     shown = [ax for ax in figure.axes if ax.axison and ax.get_label() != "<colorbar>"]
@@ -65,15 +134,31 @@ def test_every_panel_has_labelled_axes(study, name):
     for ax in shown:
         assert ax.get_xlabel().strip()
         assert ax.get_ylabel().strip()
+        title = ax.get_title(loc="left")
+        # the panel letter opens the one title: it cannot sit over another title
+        assert title.startswith("(") and not ax.get_title(loc="center"), title
+    assert layout_problems(figure) == []
+
+
+def test_the_layout_check_finds_a_title_over_a_title_and_a_cut_label(study):
+    tables, stats, _ = study
+    figure, _ = draw_figure("position_error", tables, stats)
+    figure.axes[0].set_title("a centred title over the left one", loc="center")
+    figure.axes[1].set_ylabel("y" * 400)
+    problems = layout_problems(figure)
+    assert any("overlap" in p and "centre title" in p for p in problems), problems
+    assert any(p.startswith("cut") and "ylabel" in p for p in problems), problems
 
 
 def test_position_figure_numbers_are_the_stats_numbers(study):
     tables, stats, _ = study
     _, data = draw_figure("position_error", tables, stats)
-    peaks = data["panels"]["b"]
+    peak, median = data["panels"]["b"]
     positive = [case for case in stats["cases"] if case["G"] > 0]
-    assert peaks["G"] == [case["G"] for case in positive]
-    assert peaks["peak_over_L"] == [case["position_error_peak_over_L"] for case in positive]
+    assert peak["G"] == [case["G"] for case in positive]
+    assert peak["value"] == [case["position_error_peak_over_L"] for case in positive]
+    assert peak["ci95"] == [case["position_error_peak_over_L_ci95"] for case in positive]
+    assert median["value"] == [case["position_error_median_over_L"] for case in positive]
     zero_case = data["panels"]["a"]["series"][0]
     assert zero_case["x_over_L"] == [] and zero_case["n_zero"] == zero_case["n"] == 357
 
@@ -87,9 +172,96 @@ def test_relative_error_histograms_are_normalised_pdfs(study):
     assert zero_case["exactly_zero"] and zero_case["pdf"] == []
     for series in (air, water):
         assert np.sum(np.asarray(series["pdf"]) * widths) == pytest.approx(1.0, rel=1e-12)
-    random_panel = data["panels"]["e"]
-    u3 = next(s for s in random_panel if s["label"] == "u3")
-    assert u3["abs_value"] == [case["velocity"]["u3"]["random"] for case in stats["cases"][1:]]
+    random_panel = data["panels"]["f"]
+    u3 = next(s for s in random_panel if s["label"] == "u3: std(ε/u3)")
+    assert u3["value"] == [case["velocity"]["u3"]["random"] for case in stats["cases"][1:]]
+    assert u3["ci95"] == [case["velocity"]["u3"]["ci95"]["random"] for case in stats["cases"][1:]]
+
+
+def test_angles_to_the_reference_and_to_the_truth(study):
+    tables, stats, _ = study
+    _, data = draw_figure("velocity_error", tables, stats)
+    air = data["panels"]["d"]["series"][1]
+    # the baseline adds 1 % of u along u: the angle to u equals the angle to u^ref
+    assert air["ref"]["angle_deg"] and air["true"]["angle_deg"]
+    np.testing.assert_allclose(air["ref"]["pdf_log10"], air["true"]["pdf_log10"], rtol=1e-6)
+
+
+def test_acceleration_figure_uses_the_fit_when_the_files_have_it(study):
+    tables, stats, _ = study
+    figure, data = draw_figure("acceleration_error", tables, stats)
+    assert "polynomial fit" in figure._suptitle.get_text()
+    rms = next(s for s in data["panels"]["g"] if s["label"].startswith("a3"))
+    assert rms["value"] == [
+        c["acceleration_fit"]["a3"]["rms_normalized"] for c in stats["cases"][1:]
+    ]
+
+
+def test_budget_figure_draws_the_four_parts_and_the_verdicts(study):
+    tables, stats, _ = study
+    _, data = draw_figure("error_budget", tables, stats)
+    velocity = data["panels"]["b"]
+    assert [series["label"] for series in velocity] == [
+        "optics",
+        "imaging",
+        "total refraction",
+        "baseline (no refraction)",
+    ]
+    optics, imaging, total, _ = velocity
+    np.testing.assert_allclose(optics["value"], 0.3 * np.asarray(total["value"]), rtol=1e-9)
+    np.testing.assert_allclose(imaging["value"], 0.7 * np.asarray(total["value"]), rtol=1e-9)
+    verdicts = data["panels"]["verdicts"]
+    assert len(verdicts) == 3 and all("dominates" in line for line in verdicts)
+
+
+def test_convergence_figure_draws_each_subsample(study):
+    tables, stats, _ = study
+    _, data = draw_figure("convergence", tables, stats)
+    first = data["panels"]["a"]
+    assert first["group"] == "velocity" and first["statistic"] == "random"
+    air = first["series"][0]
+    convergence = stats["cases"][1]["convergence"]
+    assert air["n_tracers"] == convergence["n_tracers"]
+    assert air["value"] == convergence["velocity"]["u3"]["random"]["value"]
+
+
+def test_deflection_figure_marks_the_literature_and_the_incidence_split(study):
+    tables, stats, _ = study
+    figure, data = draw_figure("ray_deflection", tables, stats)
+    literature = data["panels"]["a"]["literature"]
+    assert len(literature) == len(LITERATURE_STUDIES) == 10
+    water = next(entry for entry in literature if "water" in entry["flow"])
+    assert water["NL"] == pytest.approx(3.4e-4 / 1.333)
+    labels = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
+    assert "0 ≤ |θ0| ≤ 0.6" in labels and "0.6 < |θ0|" in labels
+
+
+def test_maps_show_the_uniform_medium_beside_truth_and_measurements(study):
+    tables, stats, _ = study
+    _, data = draw_figure("maps", tables, stats)
+    uniform = data["panels"]["u3 uniform medium (no refraction)"]
+    air = next(t for t in tables if t.case == "C1")
+    kept = air.velocity["id"] != 0
+    np.testing.assert_array_equal(uniform["value"], air.velocity["u3_ref"][kept])
+
+
+def test_tracer_shape_splits_small_and_large_area_changes(study, tmp_path):
+    tables, _, _ = study
+    path = tmp_path / "big.h5"
+    write_render_file(path, case="C9", k_rho=0.5, n_tracers=60)
+    with h5py.File(path, "a") as h5:
+        area = h5["tracers/area_ref"][()]
+        h5["tracers/area_meas"][...] = area * 40
+    both = [*tables, load_render(path)]
+    figure, data = draw_figure("tracer_shape", both, compute_stats(both))
+    titles = [ax.get_title(loc="left") for ax in figure.axes]
+    assert any("small changes" in t for t in titles) and any("large changes" in t for t in titles)
+    small = data["panels"]["a"]
+    # whole pixels of an 80 px² image, bins centred on whole-pixel changes
+    steps = np.diff(small["bin_edges"]) * 80
+    assert np.allclose(steps, np.round(steps)) and np.all(steps >= 1)
+    centres = (np.asarray(small["bin_edges"][:-1]) + steps / 160) * 80
+    assert np.allclose(centres / steps, np.round(centres / steps))
 
 
 def test_a_uniform_medium_alone_draws_every_figure(study):
@@ -100,5 +272,31 @@ def test_a_uniform_medium_alone_draws_every_figure(study):
         figure, _ = draw_figure(name, uniform, stats)
         figure.savefig(io.BytesIO(), format="png", dpi=30)
         notes = [text.get_text() for ax in figure.axes for text in ax.texts]
-        if name in ("position_error", "velocity_error", "error_budget"):
+        if name in ("position_error", "velocity_error"):
             assert "nothing to show: every value is zero" in notes
+
+
+def test_dt_sweep_finds_where_refraction_dominates(study, tmp_path):
+    _, stats, _ = study
+
+    def at(dt, factor):
+        document = json.loads(json.dumps(stats))
+        for case in document["cases"]:
+            baseline = case["baseline"]["velocity"]["u3"]
+            baseline["rms_normalized"] *= factor
+            baseline["ci95"]["rms_normalized"] = [
+                factor * v for v in baseline["ci95"]["rms_normalized"]
+            ]
+        return document
+
+    # the baseline falls as 1/Δt; refraction stays: it dominates from some Δt on
+    sweep = {dt: at(dt, 1e-3 / dt) for dt in (0.005, 0.02, 0.08)}
+    figure, data = draw_dt_sweep(sweep)
+    entry = data["panels"]["cases"]["C1"]["velocity.u3"]
+    assert entry["baseline"][0] / entry["baseline"][2] == pytest.approx(16.0)
+    expected = [r > b for r, b in zip(entry["refraction"], entry["baseline"], strict=True)]
+    assert entry["dominates"] == expected
+    assert layout_problems(figure) == []
+    written = write_dt_sweep_figure(sweep, tmp_path / "sweep")
+    assert (tmp_path / "sweep" / "dt_sweep.png").exists()
+    assert written["dt"] == [0.005, 0.02, 0.08]

@@ -86,7 +86,7 @@ def test_web_service_layout_imports_with_values_shapes_spacing_and_times(tmp_pat
             np.testing.assert_allclose(ff.density_gradient(frame), spectral, atol=1e-6)
         assert ff.attrs["axes"] == "x1=x,x2=y,x3=z"
         assert ff.attrs["time_indices"] == list(INDICES)
-    info = CliRunner().invoke(cli, ["field", "info", str(out)])
+    info = CliRunner().invoke(cli, ["field", "info", "--values", str(out)])
     assert info.exit_code == 0 and "8 x 6 x 10" in info.output and "C4" in info.output
     picture = tmp_path / "imported.png"
     shown = CliRunner().invoke(cli, ["field", "show", str(out), "--case", "C1", "-o", str(picture)])

@@ -99,7 +99,7 @@ def test_inconsistent_sheet_velocity_is_refused_on_reading(tmp_path):
 
 
 def test_info_describes_the_sheet_velocity(tmp_path):
-    info = describe_field_file(_write(tmp_path / "f.h5"))
+    info = describe_field_file(_write(tmp_path / "f.h5"), values=True)
     assert info["has_velocity"] and info["velocity_sheet_x1"] == 0.5
     expected = np.sqrt(np.mean(_plane(0.0).reshape(-1, 2) ** 2, axis=0))
     np.testing.assert_allclose(info["frames"][0]["velocity_rms"], expected)

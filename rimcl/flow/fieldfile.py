@@ -32,9 +32,10 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rimcl.errors import RimclError
+from rimcl.errors import RimclError, first_line
 from rimcl.field import BOUNDARIES, Field
 from rimcl.flow.cases import resolve_k_rho
+from rimcl.memory import check_array_memory, check_field_memory
 from rimcl.provenance import atomic_path, stamp_h5
 
 SCHEMA = "field"
@@ -271,8 +272,120 @@ def _plain_attr(value):
     return value
 
 
+#: Kinds of NumPy dtype a field array may hold: floating point and integers (booleans,
+#: complex numbers, strings and compound records are refused, not cast).
+_REAL_KINDS = "fiu"
+#: Largest grid coordinate: the float32 kernels square lengths (float32 overflows above
+#: 3.4e38), and rays through grids of spacing 1e20 already come out NaN.
+_LARGEST_COORDINATE = 1e18
+#: Arrays of a frame: name -> trailing shape after (n3, n2, n1).
+_FRAME_ARRAYS = {"density": (), "delta_n": (), "density_gradient": (3,), "velocity": (3,)}
+
+
+def check_hdf5_object(path, parent, name, kind):
+    """An object of an HDF5 file, checked to be what a reader expects, or None if absent.
+
+    Refuses links that leave the file (external links, datasets stored in external files,
+    virtual datasets), dangling links, objects of the wrong kind and objects the HDF5
+    library cannot open (a damaged file), each with one line naming the file and object.
+
+    Parameters
+    ----------
+    path : Path
+        The file, for messages.
+    parent : h5py.Group
+    name : str
+        Member of ``parent``.
+    kind : {"group", "dataset"}
+
+    Returns
+    -------
+    h5py.Group, h5py.Dataset or None
+    """
+    where = f"{path}: {parent.name.rstrip('/')}/{name}"
+    try:
+        link = parent.get(name, getlink=True)
+    except Exception as exc:  # h5py raises KeyError, RuntimeError or OSError by damage
+        raise RimclError(
+            f"{where} cannot be read ({first_line(exc)}); the file is damaged"
+        ) from None
+    if link is None:
+        return None
+    if isinstance(link, h5py.ExternalLink):
+        raise RimclError(
+            f"{where} is a link to {link.filename}:{link.path}; a file must hold its own data"
+        )
+    try:
+        found = parent.get(name)
+    except Exception as exc:
+        raise RimclError(
+            f"{where} cannot be opened ({first_line(exc)}); the file is damaged"
+        ) from None
+    if found is None:
+        target = link.path if isinstance(link, h5py.SoftLink) else "?"
+        raise RimclError(f"{where} is a link to {target}, which does not exist")
+    wanted = h5py.Group if kind == "group" else h5py.Dataset
+    if not isinstance(found, wanted):
+        other = "a group" if isinstance(found, h5py.Group) else "a dataset"
+        raise RimclError(f"{where} must be a {kind}, but it is {other}")
+    if kind == "dataset" and (found.external or found.is_virtual):
+        storage = "virtual" if found.is_virtual else "external"
+        raise RimclError(
+            f"{where} keeps its data in other files ({storage} storage); a file must hold "
+            "its own data"
+        )
+    return found
+
+
+def _attr(path, obj, name):
+    """An attribute's raw value, or None if absent; a damaged one is one line of error."""
+    try:
+        if name not in obj.attrs:
+            return None
+        return obj.attrs[name]
+    except Exception as exc:
+        raise RimclError(
+            f"{path}: attribute {name!r} of {obj.name} cannot be read ({first_line(exc)})"
+        ) from None
+
+
+def real_numbers(path, where, value, count=None):
+    """``value`` as a float64 array of real, finite numbers (``count`` of them if given).
+
+    Raises
+    ------
+    RimclError
+        Naming ``path`` and ``where`` for text, booleans, complex numbers, records, the
+        wrong count, NaN or infinity.
+    """
+    array = np.asarray(value)
+    if array.dtype.kind not in _REAL_KINDS:
+        wanted = "a real number" if count == 1 else "real numbers"
+        raise RimclError(f"{path}: {where} must be {wanted}, got {array.dtype} {value!r}")
+    array = array.astype(np.float64).reshape(-1)
+    if count is not None and array.size != count:
+        wanted = "one number" if count == 1 else f"{count} numbers"
+        raise RimclError(f"{path}: {where} must be {wanted}, got {array.size}")
+    if not np.all(np.isfinite(array)):
+        raise RimclError(f"{path}: {where} must be finite, got {array.tolist()}")
+    return array
+
+
+def _text_attr(path, obj, name, default):
+    value = _attr(path, obj, name)
+    if value is None:
+        return default
+    value = _plain_attr(value)
+    if not isinstance(value, str):
+        raise RimclError(f"{path}: attribute {name!r} of {obj.name} must be text, got {value!r}")
+    return value
+
+
 class FieldFile:
     """Read access to a rimcl field file; a context manager.
+
+    Opening reads and checks the layout (metadata only); frame data is read on demand, after
+    a check that it fits in memory (:mod:`rimcl.memory`).
 
     Parameters
     ----------
@@ -290,6 +403,8 @@ class FieldFile:
     boundary : {"clamp", "periodic"}
     kind : {"density", "delta_n"}
         What the frames hold.
+    n_refs : ndarray, float64, shape (n_frames,) or None
+        ``n_ref`` of each frame of a ``delta_n`` file.
     attrs : dict
         Root attributes (title, source, provenance...).
     """
@@ -297,74 +412,122 @@ class FieldFile:
     def __init__(self, path):
         self.path = Path(path)
         if not self.path.is_file():
-            raise RimclError(f"field file {self.path} does not exist")
+            problem = "is not a regular file" if self.path.exists() else "does not exist"
+            raise RimclError(f"field file {self.path} {problem}")
         try:
             self._h5 = h5py.File(self.path, "r")
-        except OSError as exc:
-            raise RimclError(f"{self.path} is not a readable HDF5 file ({exc})") from None
+        except Exception as exc:
+            raise RimclError(
+                f"{self.path} is not a readable HDF5 file ({first_line(exc)})"
+            ) from None
         try:
             self._read_layout()
-        except Exception:
+        except RimclError:
             self._h5.close()
             raise
+        except Exception as exc:  # whatever else a damaged file raises inside h5py
+            self._h5.close()
+            raise RimclError(
+                f"{self.path}: cannot read the file's layout ({type(exc).__name__}: "
+                f"{first_line(exc)}); the file is damaged"
+            ) from None
         self._plane_cache = {}
 
     def _read_layout(self):
-        h5 = self._h5
-        schema = _plain_attr(h5.attrs.get("rimcl_schema"))
+        h5, path = self._h5, self.path
+        schema = _plain_attr(_attr(path, h5, "rimcl_schema"))
         if schema != SCHEMA:
             raise RimclError(
-                f"{self.path} is not a rimcl field file (rimcl_schema = {schema!r}); "
+                f"{path} is not a rimcl field file (rimcl_schema = {schema!r}); "
                 "import flow data with 'rimcl field import'"
             )
-        version = int(h5.attrs.get("schema_version", -1))
+        version = _attr(path, h5, "schema_version")
+        version = -1 if version is None else _plain_attr(version)
         if version != SCHEMA_VERSION:
-            raise RimclError(f"{self.path}: field schema version {version} is not supported")
-        if "grid" not in h5 or "frames" not in h5:
-            raise RimclError(f"{self.path}: a field file needs the groups 'grid' and 'frames'")
-        grid = h5["grid"]
-        try:
-            self.origin = np.asarray(grid.attrs["origin"], dtype=np.float64).reshape(3)
-            self.spacing = np.asarray(grid.attrs["spacing"], dtype=np.float64).reshape(3)
-        except (KeyError, ValueError):
-            raise RimclError(
-                f"{self.path}: grid needs attributes origin and spacing (3 numbers each)"
-            ) from None
-        if not np.all(np.isfinite(self.origin)) or not np.all(self.spacing > 0):
-            raise RimclError(f"{self.path}: grid origin must be finite and spacing positive")
-        self.boundary = _plain_attr(grid.attrs.get("boundary", "clamp"))
+            raise RimclError(f"{path}: field schema version {version!r} is not supported")
+        grid = check_hdf5_object(path, h5, "grid", "group")
+        frames = check_hdf5_object(path, h5, "frames", "group")
+        if grid is None or frames is None:
+            raise RimclError(f"{path}: a field file needs the groups 'grid' and 'frames'")
+        for name in ("origin", "spacing"):
+            if _attr(path, grid, name) is None:
+                raise RimclError(f"{path}: grid needs attributes origin and spacing")
+        self.origin = real_numbers(path, "grid origin", _attr(path, grid, "origin"), 3)
+        self.spacing = real_numbers(path, "grid spacing", _attr(path, grid, "spacing"), 3)
+        if not np.all(self.spacing > 0):
+            raise RimclError(f"{path}: grid spacing must be positive, got {self.spacing.tolist()}")
+        self.boundary = _text_attr(path, grid, "boundary", "clamp")
         if self.boundary not in BOUNDARIES:
-            raise RimclError(f"{self.path}: unknown boundary {self.boundary!r}")
-        names = sorted(h5["frames"])
+            raise RimclError(f"{path}: unknown boundary {self.boundary!r}")
+        names = sorted(frames)
         if not names:
-            raise RimclError(f"{self.path} holds no frames")
-        self._frames = [h5["frames"][name] for name in names]
+            raise RimclError(f"{path} holds no frames")
+        self._frames = [check_hdf5_object(path, frames, name, "group") for name in names]
         first = self._frames[0]
         self.kind = "density" if "density" in first else "delta_n"
-        if self.kind not in first:
-            raise RimclError(f"{self.path}: frame {names[0]} has neither density nor delta_n")
-        self.shape = tuple(first[self.kind].shape)
-        if len(self.shape) != 3:
-            raise RimclError(f"{self.path}: {self.kind} must be (n3, n2, n1), got {self.shape}")
-        times = []
+        self.shape = None
+        times, n_refs = [], []
         for name, group in zip(names, self._frames, strict=True):
-            if self.kind not in group or group[self.kind].shape != self.shape:
-                raise RimclError(
-                    f"{self.path}: frame {name} needs {self.kind} of shape {self.shape}"
-                )
-            for vector in ("velocity", "density_gradient"):
-                if vector in group and group[vector].shape != (*self.shape, 3):
-                    raise RimclError(
-                        f"{self.path}: frame {name} {vector} must have shape "
-                        f"{(*self.shape, 3)}, got {group[vector].shape}"
-                    )
-            if "time" not in group.attrs:
-                raise RimclError(f"{self.path}: frame {name} has no time attribute")
-            times.append(float(group.attrs["time"]))
+            self._check_frame(name, group)
+            time = _attr(path, group, "time")
+            if time is None:
+                raise RimclError(f"{path}: frame {name} has no time attribute")
+            times.append(real_numbers(path, f"time of frame {name}", time, 1)[0])
+            if self.kind == "delta_n":
+                n_ref = _attr(path, group[self.kind], "n_ref")
+                if n_ref is None:
+                    raise RimclError(f"{path}: delta_n of frame {name} has no n_ref attribute")
+                n_ref = real_numbers(path, f"n_ref of frame {name}", n_ref, 1)[0]
+                if not n_ref > 0:
+                    raise RimclError(f"{path}: n_ref of frame {name} must be positive, got {n_ref}")
+                n_refs.append(n_ref)
+        far_corner = self.origin + self.spacing * np.array(self.shape[::-1], dtype=np.float64)
+        if not np.all(np.abs(far_corner) < _LARGEST_COORDINATE):
+            raise RimclError(
+                f"{path}: the grid (origin {self.origin.tolist()}, spacing "
+                f"{self.spacing.tolist()}) reaches {far_corner.tolist()}, beyond the "
+                f"coordinates rimcl can trace (|x| < {_LARGEST_COORDINATE:g})"
+            )
         self.times = np.array(times)
-        if not np.all(np.isfinite(self.times)) or np.any(np.diff(self.times) <= 0):
-            raise RimclError(f"{self.path}: frame times must increase, got {times}")
-        self.attrs = {key: _plain_attr(value) for key, value in h5.attrs.items()}
+        if np.any(np.diff(self.times) <= 0):
+            raise RimclError(f"{path}: frame times must increase, got {times}")
+        self.n_refs = np.array(n_refs) if n_refs else None
+        self.attrs = {}
+        for key in h5.attrs:
+            self.attrs[key] = _plain_attr(_attr(path, h5, key))
+
+    def _check_frame(self, name, group):
+        """Check one frame's arrays (metadata only): kind, shapes and dtypes."""
+        path = self.path
+        arrays = {}
+        for array_name in _FRAME_ARRAYS:
+            found = check_hdf5_object(path, group, array_name, "dataset")
+            if found is not None:
+                arrays[array_name] = found
+        if self.kind not in arrays:
+            raise RimclError(f"{path}: frame {name} needs a {self.kind} dataset")
+        if {"density", "delta_n"} <= set(arrays):
+            raise RimclError(f"{path}: frame {name} holds both density and delta_n")
+        if self.shape is None:
+            self.shape = tuple(int(n) for n in arrays[self.kind].shape)
+            if len(self.shape) != 3 or min(self.shape) < 1:
+                raise RimclError(
+                    f"{path}: {self.kind} must be (n3, n2, n1) with at least one node along "
+                    f"each axis, got {self.shape}"
+                )
+        for array_name, dataset in arrays.items():
+            want = (*self.shape, *_FRAME_ARRAYS[array_name])
+            if array_name == "density_gradient" and self.kind != "density":
+                raise RimclError(f"{path}: frame {name} holds density_gradient with delta_n")
+            if dataset.shape != want:
+                raise RimclError(
+                    f"{path}: frame {name} {array_name} must have shape {want}, got {dataset.shape}"
+                )
+            if dataset.dtype.kind not in _REAL_KINDS:
+                raise RimclError(
+                    f"{path}: frame {name} {array_name} must hold real numbers (float or "
+                    f"integer), got {dataset.dtype}"
+                )
 
     def close(self):
         """Close the file."""
@@ -427,22 +590,73 @@ class FieldFile:
         """Whether every frame holds a stored density gradient."""
         return all("density_gradient" in group for group in self._frames)
 
-    def _group(self, frame):
+    def _index(self, frame):
+        """The stored frame ``frame`` (negative counts from the end) as an index >= 0."""
         index = int(frame)
         if not -self.n_frames <= index < self.n_frames:
             raise RimclError(
                 f"{self.path} has frames 0..{self.n_frames - 1}; frame {frame} does not exist"
             )
-        return self._frames[index]
+        return index % self.n_frames
+
+    def _group(self, frame):
+        return self._frames[self._index(frame)]
 
     def _read(self, frame, name, selection=()):
         group = self._group(frame)
         if name not in group:
             raise RimclError(f"{self.path}: frame {group.name} holds no {name}")
-        values = group[name][selection] if selection else group[name][()]
+        dataset = group[name]
+        where = f"{name} of frame {group.name}"
+        if not selection:
+            check_array_memory(dataset.shape, 4, f"reading {where} of {self.path}", factor=3)
+        elif dataset.chunks is not None:
+            # HDF5 decompresses whole chunks, however small the part read
+            check_array_memory(
+                dataset.chunks, dataset.dtype.itemsize, f"one chunk of {where} of {self.path}"
+            )
+        try:
+            values = dataset[selection] if selection else dataset[()]
+        except Exception as exc:  # damaged chunks or B-trees surface as several h5py errors
+            raise RimclError(
+                f"{self.path}: cannot read {where} ({first_line(exc)}); the file is damaged"
+            ) from None
         if not np.all(np.isfinite(values)):
-            raise RimclError(f"{self.path}: {name} of frame {group.name} holds NaN or inf")
+            raise RimclError(f"{self.path}: {where} holds NaN or inf")
         return values
+
+    def read_slab(self, frame, name, rows):
+        """Rows ``rows`` (a slice along ``x3``) of the array ``name`` of one frame.
+
+        For streaming through frames too large to hold: memory is that of the slab.
+
+        Returns
+        -------
+        ndarray, shape (rows, n2, n1) or (rows, n2, n1, 3)
+        """
+        return self._read(frame, name, (rows,))
+
+    def storage(self):
+        """What each array of the frames is stored as, and how much of it is on disk.
+
+        Returns
+        -------
+        dict of str to dict
+            Per array name: ``dtype``, ``declared_bytes`` (all frames, uncompressed) and
+            ``stored_bytes`` (all frames, as written; far smaller for fill values).
+        """
+        found = {}
+        for group in self._frames:
+            for name in _FRAME_ARRAYS:
+                if name not in group:
+                    continue
+                dataset = group[name]
+                entry = found.setdefault(
+                    name, {"dtype": str(dataset.dtype), "declared_bytes": 0, "stored_bytes": 0}
+                )
+                entry["declared_bytes"] += int(dataset.size) * dataset.dtype.itemsize
+                entry["stored_bytes"] += int(dataset.id.get_storage_size())
+        return found
 
     def density(self, frame):
         """Density of one frame, float32 ``(n3, n2, n1)`` (dimensionless)."""
@@ -455,7 +669,7 @@ class FieldFile:
         if self.kind != "delta_n":
             raise RimclError(f"{self.path} stores density; use field() with a K*rho")
         values = self._read(frame, "delta_n")
-        return values, float(self._group(frame)["delta_n"].attrs["n_ref"])
+        return values, float(self.n_refs[int(frame)])
 
     def density_gradient(self, frame):
         """Stored ``∇ρ`` of one frame, float32 ``(n3, n2, n1, 3)``, or None if absent."""
@@ -538,8 +752,9 @@ class FieldFile:
             ``δn = G (ρ - mean ρ)``, ``n_ref = 1 + G mean ρ``, ``∇n = G ∇ρ`` (stored, or
             computed: spectral for periodic grids, 4th-order differences otherwise).
         """
-        group = self._group(frame)
-        attrs = {"frame": int(frame) % self.n_frames, "time": float(group.attrs["time"])}
+        index = self._index(frame)
+        check_field_memory(self.shape, f"frame {index} of {self.path}")
+        attrs = {"frame": index, "time": float(self.times[index])}
         if self.kind == "delta_n":
             self._refuse_case(case, k_rho)
             values, n_ref = self.delta_n(frame)
@@ -561,6 +776,7 @@ class FieldFile:
         weights = self.time_weights(time, method)
         if len(weights) == 1:
             return self.field(weights[0][0], k_rho, case=case)
+        check_field_memory(self.shape, f"time {float(time):g} of {self.path}")
         attrs = {"time": float(time), "frames": [f for f, _ in weights]}
         if self.kind == "delta_n":
             self._refuse_case(case, k_rho)
@@ -575,6 +791,8 @@ class FieldFile:
 
     def velocity_at(self, time, method="auto"):
         """Velocity at ``time`` (interpolated between frames), float64 ``(n3, n2, n1, 3)``."""
+        # float64 result, a float64 term and the float32 frame: 60 bytes per node
+        check_array_memory((*self.shape, 3), 20, f"velocity at time {float(time):g} of {self.path}")
         return self._blend(time, self.velocity, method)
 
     def sheet_velocity(self, time, x1, method="auto"):
@@ -680,6 +898,49 @@ class FieldFile:
             boundary=self.boundary,
             attrs=attrs,
         )
+
+
+def field_kind(path):
+    """What a field file stores, ``"density"`` or ``"delta_n"`` (metadata only)."""
+    with FieldFile(path) as ff:
+        return ff.kind
+
+
+#: The Gladstone–Dale case of a density file when none is given (air).
+DEFAULT_CASE = "C1"
+
+
+def case_arguments(path=None, case=None, k_rho=None):
+    """The ``case`` and ``k_rho`` to use with a field file, from its metadata.
+
+    A file storing ``delta_n`` carries its own refractive index and takes neither (giving
+    one is refused); a density file takes the given case or ``K*rho``, else
+    :data:`DEFAULT_CASE`.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        Field file; None is the shipped sample.
+    case : str, optional
+    k_rho : float, optional
+
+    Returns
+    -------
+    case, k_rho : str or None, float or None
+    """
+    if path is None:
+        from rimcl.flow import sample_path
+
+        path = sample_path()
+    if field_kind(path) == "delta_n":
+        if case is not None or k_rho is not None:
+            raise RimclError(
+                f"{path} stores delta_n (its own refractive index); a case or K*rho does not apply"
+            )
+        return None, None
+    if case is None and k_rho is None:
+        return DEFAULT_CASE, None
+    return case, k_rho
 
 
 def load_field(path=None, frame=0, *, k_rho=None, case=None, time=None):

@@ -21,14 +21,16 @@ import contextlib
 import dataclasses
 import math
 import re
+import zipfile
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from rimcl.derivatives import gradient as compute_gradient
-from rimcl.errors import RimclError
-from rimcl.flow.fieldfile import write_field
+from rimcl.errors import RimclError, first_line
+from rimcl.flow.fieldfile import check_hdf5_object, real_numbers, write_field
+from rimcl.memory import check_array_memory, check_import_memory
 from rimcl.provenance import check_output
 
 DNS_AXES = ("x", "y", "z")
@@ -137,23 +139,36 @@ def parse_stride(stride):
 
 
 def parse_frames(frames):
-    """Time indices from ``"286,287"`` or ``"285-290"`` (or a sequence); None = all."""
+    """Time indices (1-based) from ``"286,287"`` or ``"285-290"`` (or a sequence).
+
+    Returns
+    -------
+    list of int or None
+        Sorted, at least one; None (all frames) for None.
+    """
     if frames is None:
         return None
     if not isinstance(frames, str):
-        return sorted({int(f) for f in frames})
-    chosen = set()
-    for part in frames.replace(" ", "").split(","):
-        try:
-            if "-" in part[1:]:
-                first, last = part.split("-", 1)
-                chosen.update(range(int(first), int(last) + 1))
-            else:
-                chosen.add(int(part))
-        except ValueError:
-            raise RimclError(
-                f"--frames must be indices or ranges like 285-290, not {part!r}"
-            ) from None
+        chosen = {int(f) for f in frames}
+    else:
+        chosen = set()
+        for part in frames.replace(" ", "").split(","):
+            try:
+                if "-" in part[1:]:
+                    first, last = (int(b) for b in part.split("-", 1))
+                    if last < first:
+                        raise RimclError(f"--frames range {part!r} is empty (it counts down)")
+                    chosen.update(range(first, last + 1))
+                else:
+                    chosen.add(int(part))
+            except ValueError:
+                raise RimclError(
+                    f"--frames must be indices or ranges like 285-290, not {part!r}"
+                ) from None
+    if not chosen:
+        raise RimclError("--frames names no frame")
+    if min(chosen) < 1:
+        raise RimclError(f"--frames are time indices from 1, got {min(chosen)}")
     return sorted(chosen)
 
 
@@ -190,6 +205,12 @@ class _Layout:
                 raise RimclError(
                     f"--crop leaves {max(stop - start, 0)} node(s) along x{k + 1} "
                     f"(DNS {letter}, {counts[letter]} nodes); at least 2 are needed"
+                )
+            kept = len(range(start, stop, stride[k]))
+            if kept < 2:
+                raise RimclError(
+                    f"--stride {stride[k]} keeps {kept} node of the {stop - start} along "
+                    f"x{k + 1} (DNS {letter}); at least 2 are needed"
                 )
             self.ranges[letter] = slice(start, stop, stride[k])
         self.selection = tuple(self.ranges[letter] for letter in ("z", "y", "x"))
@@ -252,19 +273,65 @@ def _finite(values, where):
     return values
 
 
+#: Depth of groups searched for cut-out datasets (cut-outs are flat; this bounds cycles).
+_SEARCH_DEPTH = 8
+
+
+def _member_names(group, prefix="", depth=0):
+    """Paths of the datasets and links below ``group`` (not followed out of the file)."""
+    names = []
+    for name in group:
+        link = group.get(name, getlink=True)
+        member = group.get(name) if not isinstance(link, h5py.ExternalLink) else None
+        if isinstance(member, h5py.Group):
+            if depth < _SEARCH_DEPTH:
+                names += _member_names(member, f"{prefix}{name}/", depth + 1)
+        else:  # a dataset, or a link whose target the checks below report
+            names.append(f"{prefix}{name}")
+    return names
+
+
+def _dataset(path, h5, name):
+    """The dataset ``name`` (a path) of an open file, checked (links, kind, dtype)."""
+    parent_name, _, leaf = name.rpartition("/")
+    parent = h5[parent_name] if parent_name else h5
+    dataset = check_hdf5_object(path, parent, leaf, "dataset")
+    if dataset is not None and dataset.dtype.kind not in "fiu":
+        raise RimclError(
+            f"{path}: {name} must hold real numbers (float or integer), got {dataset.dtype}"
+        )
+    return dataset
+
+
+def _read_values(path, dataset, selection=()):
+    """Values of a dataset; a damaged one is one line of error."""
+    if dataset.chunks is not None:  # HDF5 decompresses whole chunks, however little is read
+        check_array_memory(
+            dataset.chunks, dataset.dtype.itemsize, f"one chunk of {path}: {dataset.name}"
+        )
+    try:
+        return dataset[selection] if selection else dataset[()]
+    except Exception as exc:
+        raise RimclError(
+            f"{path}: cannot read {dataset.name} ({first_line(exc)}); the file is damaged"
+        ) from None
+
+
 def _scan_cutout(path, inventory, coordinates):
     """Record the density/velocity datasets of one file and check its coordinates."""
     try:
         h5 = h5py.File(path, "r")
-    except OSError:
+    except Exception:
         raise RimclError(
             f"{path} is not an HDF5 or netCDF-4 file (netCDF-3 classic cannot be read)"
         ) from None
     with h5:
-        found = []
-        h5.visititems(
-            lambda name, obj: found.append(name) if isinstance(obj, h5py.Dataset) else None
-        )
+        try:
+            found = _member_names(h5)
+        except Exception as exc:
+            raise RimclError(
+                f"{path}: cannot list its datasets ({first_line(exc)}); the file is damaged"
+            ) from None
         variables = [(n, _VARIABLE.match(n.rsplit("/", 1)[-1])) for n in found]
         variables = [(n, m) for n, m in variables if m]
         if not variables:
@@ -273,11 +340,13 @@ def _scan_cutout(path, inventory, coordinates):
                 f"{', '.join(found[:8]) or 'none'})"
             )
         for letter, name in COORDINATES.items():
-            if name not in h5:
+            dataset = _dataset(path, h5, name)
+            if dataset is None:
                 raise RimclError(
                     f"{path} has no {name} dataset (cut-outs need xcoor, ycoor, zcoor)"
                 )
-            values = np.asarray(h5[name][()], dtype=np.float64).reshape(-1)
+            check_array_memory(dataset.shape, 8, f"reading {path}: {name}")
+            values = np.asarray(_read_values(path, dataset), dtype=np.float64).reshape(-1)
             _uniform_spacing(values, f"{path}: {name}")
             if letter not in coordinates:
                 coordinates[letter] = values
@@ -293,7 +362,7 @@ def _scan_cutout(path, inventory, coordinates):
                     f"{variable} at time index {index} appears twice ({inventory[key][0]} "
                     f"and {path})"
                 )
-            dataset = h5[name]
+            dataset = _dataset(path, h5, name)
             components = 3 if variable == "velocity" else 1
             shape = tuple(coordinates[a].size for a in ("z", "y", "x"))
             allowed = [(*shape, components)] + ([shape] if components == 1 else [])
@@ -303,7 +372,9 @@ def _scan_cutout(path, inventory, coordinates):
                     f"(nz, ny, nx, {components}) = {(*shape, components)}"
                 )
             stored_time = dataset.attrs.get("time")
-            inventory[key] = (path, name, None if stored_time is None else float(stored_time))
+            if stored_time is not None:
+                stored_time = real_numbers(path, f"time of {name}", stored_time, 1)[0]
+            inventory[key] = (path, name, stored_time)
 
 
 def read_cutouts(
@@ -355,7 +426,8 @@ def read_cutouts(
     available = sorted(index for index, variable in inventory if variable == "density")
     if not available:
         raise RimclError("the files hold velocity but no density; rimcl needs the density")
-    wanted = parse_frames(frames) or available
+    wanted = parse_frames(frames)
+    wanted = available if wanted is None else wanted
     missing = sorted(set(wanted) - set(available))
     if missing:
         raise RimclError(f"no density for time index {missing} (available: {available})")
@@ -366,6 +438,7 @@ def read_cutouts(
     counts = {letter: coordinates[letter].size for letter in DNS_AXES}
     layout = _Layout(axes, crop, stride, counts)
     origin, spacing, nodes = layout.grid(coordinates)
+    check_import_memory(nodes[::-1], len(wanted), bool(with_velocity), "importing the cut-outs")
     with contextlib.ExitStack() as stack:
         handles = {}
 
@@ -375,7 +448,7 @@ def read_cutouts(
                 handles[path] = stack.enter_context(h5py.File(path, "r"))
             dataset = handles[path][name]
             selection = layout.selection + ((slice(None),) if dataset.ndim == 4 else ())
-            values = _finite(dataset[selection], f"{path}: {name}")
+            values = _finite(_read_values(path, dataset, selection), f"{path}: {name}")
             return values[..., 0] if variable == "density" and values.ndim == 4 else values
 
         density = [layout.scalar(read(index, "density")) for index in wanted]
@@ -419,14 +492,10 @@ def read_npz(
     ImportedFlow
     """
     path = Path(path)
-    try:
-        archive = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise RimclError(f"{path} is not a readable .npz file ({exc})") from None
-    with archive:
+    with open_npz(path) as archive:
         if "density" not in archive:
             raise RimclError(f"{path} has no 'density' array (found: {sorted(archive.files)})")
-        density = _finite(np.asarray(archive["density"]), f"{path}: density")
+        density = _finite(npz_array(archive, path, "density"), f"{path}: density")
         if density.ndim == 3:
             density = density[None]
         if density.ndim != 4:
@@ -435,7 +504,7 @@ def read_npz(
             )
         velocity = None
         if "velocity" in archive:
-            velocity = _finite(np.asarray(archive["velocity"]), f"{path}: velocity")
+            velocity = _finite(npz_array(archive, path, "velocity"), f"{path}: velocity")
             if velocity.ndim == 4:
                 velocity = velocity[None]
             if velocity.shape != (*density.shape, 3):
@@ -447,18 +516,20 @@ def read_npz(
         coordinates, spacings = _npz_coordinates(archive, path, shape)
         times = None
         if "times" in archive:
-            times = np.asarray(archive["times"], dtype=np.float64).reshape(-1)
+            times = real_numbers(path, "times", npz_array(archive, path, "times"))
             if times.size != density.shape[0]:
                 raise RimclError(
                     f"{path}: times has {times.size} entries for {density.shape[0]} frames"
                 )
     available = list(range(1, density.shape[0] + 1))
-    wanted = parse_frames(frames) or available
+    wanted = parse_frames(frames)
+    wanted = available if wanted is None else wanted
     missing = sorted(set(wanted) - set(available))
     if missing:
         raise RimclError(f"{path} has frames 1..{density.shape[0]}; no frame {missing}")
     layout = _Layout(axes, crop, stride, shape)
     origin, spacing, nodes = layout.grid(coordinates, spacings)
+    check_import_memory(nodes[::-1], len(wanted), velocity is not None, f"importing {path}")
     picks = [i - 1 for i in wanted]
     return ImportedFlow(
         density=[layout.scalar(density[i][layout.selection]) for i in picks],
@@ -474,6 +545,69 @@ def read_npz(
     )
 
 
+def open_npz(path):
+    """An ``.npz`` archive opened without pickles; anything else is one line of error.
+
+    Returns
+    -------
+    numpy.lib.npyio.NpzFile
+        A context manager.
+    """
+    path = Path(path)
+    if not zipfile.is_zipfile(path):
+        with open(path, "rb") as start:
+            single = start.read(6) == b"\x93NUMPY"
+        raise RimclError(
+            f"{path} is "
+            + ("a single .npy array" if single else "not a zip archive")
+            + ", not a .npz archive of named arrays"
+        )
+    try:
+        return np.load(path, allow_pickle=False)
+    except Exception as exc:
+        raise RimclError(f"{path} is not a readable .npz file ({exc})") from None
+
+
+def npz_array(archive, path, name):
+    """One array of an open ``.npz`` archive, after checking from its header that it holds
+    real numbers and fits in memory.
+
+    Parameters
+    ----------
+    archive : numpy.lib.npyio.NpzFile
+    path : Path
+        The archive, for messages.
+    name : str
+
+    Returns
+    -------
+    ndarray
+    """
+    try:
+        with archive.zip.open(f"{name}.npy") as member:
+            version = np.lib.format.read_magic(member)
+            read_header = {
+                (1, 0): np.lib.format.read_array_header_1_0,
+                (2, 0): np.lib.format.read_array_header_2_0,
+            }.get(version)
+            header = None if read_header is None else read_header(member)
+        if header is not None:
+            shape, _, dtype = header
+            if dtype.kind not in "fiu":
+                raise RimclError(
+                    f"{path}: {name} must hold real numbers (float or integer), got {dtype}"
+                )
+            check_array_memory(shape, dtype.itemsize, f"reading {path}: {name}", factor=3)
+        values = archive[name]
+    except RimclError:
+        raise
+    except Exception as exc:
+        raise RimclError(f"{path}: cannot read array {name!r} ({exc})") from None
+    if values.dtype.kind not in "fiu":
+        raise RimclError(f"{path}: {name} must hold real numbers, got {values.dtype}")
+    return values
+
+
 def _npz_coordinates(archive, path, shape):
     """Coordinates of an npz file's nodes per DNS axis, and its spacings if given exactly.
 
@@ -486,7 +620,7 @@ def _npz_coordinates(archive, path, shape):
     if all(name in archive for name in COORDINATES.values()):
         coordinates = {}
         for letter, name in COORDINATES.items():
-            values = np.asarray(archive[name], dtype=np.float64).reshape(-1)
+            values = real_numbers(path, name, npz_array(archive, path, name))
             if values.size != shape[letter]:
                 raise RimclError(
                     f"{path}: {name} has {values.size} nodes but density has {shape[letter]} "
@@ -496,8 +630,10 @@ def _npz_coordinates(archive, path, shape):
         return coordinates, None
     if "spacing" not in archive:
         raise RimclError(f"{path} needs xcoor, ycoor, zcoor or spacing (and origin) arrays")
-    spacing = np.asarray(archive["spacing"], dtype=np.float64).reshape(-1)
-    origin = np.asarray(archive["origin"] if "origin" in archive else np.zeros(3), dtype=float)
+    spacing = real_numbers(path, "spacing", npz_array(archive, path, "spacing"))
+    origin = np.zeros(3)
+    if "origin" in archive:
+        origin = real_numbers(path, "origin", npz_array(archive, path, "origin"))
     if spacing.size != 3 or origin.size != 3 or not np.all(spacing > 0):
         raise RimclError(f"{path}: spacing and origin must be 3 numbers (x, y, z), spacing > 0")
     coordinates = {

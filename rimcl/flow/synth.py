@@ -35,6 +35,7 @@ import scipy.fft
 
 from rimcl.errors import RimclError
 from rimcl.flow.fieldfile import write_field
+from rimcl.memory import check_synth_memory
 from rimcl.provenance import check_output
 
 RHO_LIGHT = 1.0
@@ -388,6 +389,7 @@ def synthesize(
         raise RimclError(f"the start time must be >= 0, got {t_start}")
     if sheet_x1 is not None and not math.isfinite(sheet_x1):
         raise RimclError(f"the sheet velocity plane x1 must be finite, got {sheet_x1}")
+    check_synth_memory(grid, frames)
     solver = BoussinesqSolver(grid, reynolds, schmidt, gravity_axis)
     u_hat, rho_hat = solver.initial_state(seed)
     history = {"time": [], "kinetic_energy": [], "density_variance": [], "dissipation": []}

@@ -1,0 +1,84 @@
+"""summary.md: headline statistics with intervals, the paper's labelled, marks, budget, n/a."""
+
+import pytest
+from synthetic_budget import write_budget_file
+from synthetic_render import write_render_file
+
+from rimcl.scene import load_scene
+from rimcl.stats import compute_stats, load_render
+from rimcl.summary import significant, summary_markdown, with_interval
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return load_scene(None)
+
+
+def table_rows(text, first_cell):
+    """Cells of the Markdown table rows whose first cell is ``first_cell``."""
+    rows = []
+    for line in text.splitlines():
+        cells = [cell.strip() for cell in line.strip("|").split(" | ")]
+        if line.startswith("|") and cells[0] == first_cell:
+            rows.append(cells)
+    return rows
+
+
+def test_values_come_with_their_intervals_and_the_paper_statistics_are_labelled(tmp_path, scene):
+    paths = []
+    for name, g, seed in (("C1", 2.82e-4, 0), ("C4", 0.334, 1)):
+        paths.append(tmp_path / f"{name}.h5")
+        write_budget_file(paths[-1], fit_frames=3, case=name, k_rho=g, n_tracers=80, seed=seed)
+    stats = compute_stats([load_render(path) for path in paths])
+    text = summary_markdown(stats, scene)
+    air = stats["cases"][0]
+    u3 = air["velocity"]["u3"]
+    low, high = u3["ci95"]["rms_normalized"]
+    expected = (
+        f"{significant(100 * u3['rms_normalized'])} "
+        f"[{significant(100 * low, 2)}, {significant(100 * high, 2)}] %"
+    )
+    assert expected in table_rows(text, "C1")[1]  # position table first, then u3
+    assert (
+        "## The paper's statistics" in text
+        and "**Acceleration a3, sliding polynomial fit**" in text
+    )
+    # |ε_x| in a header must not split the table
+    header = next(line for line in text.splitlines() if "peak \\|ε_x\\| / L" in line)
+    assert header.count(" | ") == 5
+    assert "## Error budget: optics, imaging, total, baseline" in text
+    assert air["budget_verdict"]["text"] in text
+
+
+def test_a_growing_statistic_is_marked(tmp_path, scene):
+    path = tmp_path / "c1.h5"
+    write_render_file(path, n_tracers=40)
+    stats = compute_stats([load_render(path)])
+    case = stats["cases"][0]
+    case["convergence"]["not_converged"] = ["velocity.u3.random"]
+    text = summary_markdown(stats, scene)
+    paper_row = table_rows(text, "C1")[-1]  # the paper's statistics come last
+    random = with_interval(
+        case["velocity"]["u3"]["random"], case["velocity"]["u3"]["ci95"]["random"], 100, " %"
+    )
+    assert f"{random} †" in paper_row
+    assert "- C1: not converged: `velocity.u3.random`" in text
+
+
+def test_empty_samples_read_n_a(tmp_path, scene):
+    path = tmp_path / "lost.h5"
+    write_render_file(path, n_tracers=5, flagged={i: 1 for i in range(5)})
+    text = summary_markdown(compute_stats([load_render(path)]), scene)
+    position = table_rows(text, "C1")[0]
+    assert position[3:] == ["0/5", "n/a", "n/a"]
+    assert " 0 " not in " ".join(position[4:])
+
+
+def test_significant_digits_without_exponents_in_the_readable_range():
+    assert significant(2134.0) == "2130"
+    assert significant(2134.0, 2) == "2100"
+    assert significant(0.012345) == "0.0123"
+    assert significant(-0.094, 2) == "-0.094"
+    assert significant(3.2e-6) == "3.2e-06"
+    assert with_interval(None, [1, 2]) == "n/a"
+    assert with_interval(0.5, None, 100, " %") == "50.0 %"
