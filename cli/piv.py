@@ -194,7 +194,7 @@ def analyze(
     type=POSITIVE,
     default=0.1,
     show_default=True,
-    help="Time between exposures (0.1 on the sample: 1.3 px rms at 512 px).",
+    help="Time between exposures (0.1 on the sample: 1.5 px rms at 512 px).",
 )
 @click.option("--x-sheet", type=FINITE, default=None, help="Sheet centre x1 [default: scene].")
 @window_option

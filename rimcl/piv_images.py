@@ -643,7 +643,7 @@ class FlowVelocity:
 #: interval (the rule of the PTV tracks, :mod:`rimcl.measure`).
 TRACKING_SUBSTEPS = 8
 #: Default time between exposures (time units): on the shipped sample (velocity rms 0.14
-#: on the sheet, frames 0.02 apart) 0.1 moves tracers 1.3 px rms and up to 5 px at 512 px,
+#: on the sheet, frames 0.02 apart) 0.1 moves tracers 1.5 px rms and up to 4.5 px at 512 px,
 #: the few pixels PIV is made for, from stored frames only.
 DEFAULT_DT = 0.1
 MOTION_3D = "3-D: tracers carried by the full velocity (u1, u2, u3); out-of-plane loss modelled"

@@ -648,8 +648,8 @@ def _piv_keys():
             "dt",
             0.1,
             "float",
-            "time between exposures A and B; 0.1 on the sample moves tracers 1.3 px rms, "
-            "up to 5 px, at 512 px",
+            "time between exposures A and B; 0.1 on the sample moves tracers 1.5 px rms, "
+            "up to 4.5 px, at 512 px",
             positive=True,
         ),
         SceneKey(
