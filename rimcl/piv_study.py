@@ -424,6 +424,13 @@ def load_piv_case(path):
     return vectors, stats
 
 
+def _ratio(numerator, denominator):
+    if numerator is None or not denominator:
+        return None
+    ratio = numerator / denominator
+    return ratio if math.isfinite(ratio) else None
+
+
 def agreement_with_ptv(piv_stats, ptv_stats):
     """PIV against PTV refraction errors of the same case, side by side.
 
@@ -438,22 +445,28 @@ def agreement_with_ptv(piv_stats, ptv_stats):
     -------
     dict
         For ``u2, u3, magnitude``: ``rms_normalized`` and ``median`` of each method and the
-        ratio PIV / PTV of ``rms_normalized`` (None where undefined).
+        ratio PIV / PTV of ``rms_normalized``; where the PTV entry has its optics part,
+        also both optics parts' ``rms_normalized`` and their ratio (None where undefined).
     """
+    ptv_optics = ptv_stats.get("optics", {}).get("velocity")
     result = {}
     for key in ("u2", "u3", "magnitude"):
         piv, ptv = piv_stats["velocity"][key], ptv_stats["velocity"][key]
-        ratio = None
-        if piv["rms_normalized"] is not None and ptv["rms_normalized"]:
-            ratio = piv["rms_normalized"] / ptv["rms_normalized"]
-            ratio = ratio if math.isfinite(ratio) else None
         result[key] = {
             "piv_rms_normalized": piv["rms_normalized"],
             "ptv_rms_normalized": ptv["rms_normalized"],
             "piv_median": piv["median"],
             "ptv_median": ptv["median"],
-            "ratio_rms_normalized": ratio,
+            "ratio_rms_normalized": _ratio(piv["rms_normalized"], ptv["rms_normalized"]),
         }
+        if ptv_optics is not None:
+            piv_part = piv_stats["optics"][key]["rms_normalized"]
+            ptv_part = ptv_optics[key]["rms_normalized"]
+            result[key].update(
+                piv_optics_rms_normalized=piv_part,
+                ptv_optics_rms_normalized=ptv_part,
+                optics_ratio_rms_normalized=_ratio(piv_part, ptv_part),
+            )
     return result
 
 

@@ -389,30 +389,42 @@ def summary_markdown(stats, scene):
 PIV_AGREEMENT_FACTOR = 2.0
 
 
-def piv_verdict(stats):
-    """One line: do the PIV and PTV refraction errors of ``|u|`` agree, case by case?"""
+def _agreement(stats, key):
+    """Cases whose PIV/PTV ratio ``key`` of ``|u|`` lies within the factor, and the others."""
     agree, differ = [], []
     for case in stats["cases"]:
-        ratio = case.get("piv_vs_ptv", {}).get("magnitude", {}).get("ratio_rms_normalized")
+        ratio = case.get("piv_vs_ptv", {}).get("magnitude", {}).get(key)
         if ratio is not None:
             within = 1 / PIV_AGREEMENT_FACTOR <= ratio <= PIV_AGREEMENT_FACTOR
             (agree if within else differ).append(f"{case['name']} ({significant(ratio, 2)})")
-    if not agree and not differ:
-        return 'No PTV case to compare with (run.mode = "piv").'
-    measure = "PIV/PTV of rms(ε_|u|)/rms(|u|)"
+    return agree, differ
+
+
+def _agreement_sentence(agree, differ, what):
     factor = f"a factor {PIV_AGREEMENT_FACTOR:g}"
     if not differ:
-        return f"**Verdict: PIV and PTV agree** within {factor} in every case ({measure}): " + (
-            ", ".join(agree) + "."
-        )
+        return f"{what} **agree** within {factor} in every case: {', '.join(agree)}."
     if not agree:
-        return f"**Verdict: PIV and PTV differ** by more than {factor} ({measure}): " + (
-            ", ".join(differ) + "."
-        )
+        return f"{what} **differ** by more than {factor}: {', '.join(differ)}."
     return (
-        f"**Verdict: PIV and PTV agree** within {factor} in {', '.join(agree)} and "
-        f"**differ** in {', '.join(differ)} ({measure})."
+        f"{what} **agree** within {factor} in {', '.join(agree)} and **differ** in "
+        f"{', '.join(differ)}."
     )
+
+
+def piv_verdict(stats):
+    """One line: do the PIV and PTV refraction errors of ``|u|`` agree, case by case (and
+    their optics parts, where the PTV cases have them)?"""
+    agree, differ = _agreement(stats, "ratio_rms_normalized")
+    if not agree and not differ:
+        return 'No PTV case to compare with (run.mode = "piv").'
+    line = "**Verdict:** " + _agreement_sentence(
+        agree, differ, "PIV and PTV errors (PIV/PTV of rms(ε_|u|)/rms(|u|))"
+    )
+    agree, differ = _agreement(stats, "optics_ratio_rms_normalized")
+    if agree or differ:
+        line += " " + _agreement_sentence(agree, differ, "Their optics parts (rays only)")
+    return line
 
 
 def piv_lines(stats):
@@ -454,6 +466,7 @@ def piv_lines(stats):
         "PIV rms(ε)/rms(|u|)",
         "PTV rms(ε)/rms(|u|)",
         "PIV/PTV",
+        "optics PIV/PTV",
     ]
     rows = []
     for case in cases:
@@ -471,8 +484,11 @@ def piv_lines(stats):
                 number(pixels["baseline_rms"]),
                 _percent_of(piv["velocity"]["u3"], "rms_normalized"),
                 _percent_of(piv["velocity"]["magnitude"], "rms_normalized"),
-                percent(compared.get("ptv_rms_normalized")),
+                _percent_of(case["velocity"]["magnitude"], "rms_normalized")
+                if "velocity" in case
+                else "n/a",
                 number(compared.get("ratio_rms_normalized")),
+                number(compared.get("optics_ratio_rms_normalized")),
             ]
         )
     return [*lines, *_table(header, rows), "", piv_verdict(stats), ""]

@@ -63,12 +63,16 @@ def test_both_writes_piv_cases_beside_ptv(both):
             compared["piv_rms_normalized"] == case["piv"]["velocity"]["magnitude"]["rms_normalized"]
         )
         assert compared["ptv_rms_normalized"] == case["velocity"]["magnitude"]["rms_normalized"]
+        assert (
+            compared["ptv_optics_rms_normalized"]
+            == (case["optics"]["velocity"]["magnitude"]["rms_normalized"])
+        )
     # refraction grows with G: C4 bends the vectors far more than C0
     c0, c4 = (cases[name]["piv"]["displacement_px"]["refraction_rms"] for name in ("C0", "C4"))
     assert c4 > 100 * c0 > 0
     assert "in-plane only" in cases["C0"]["piv"]["motion"]
     summary = (out / "summary.md").read_text()
-    assert "## PIV beside PTV" in summary and "**Verdict: PIV and PTV" in summary
+    assert "## PIV beside PTV" in summary and "**Verdict:** PIV and PTV errors" in summary
     assert "out-of-plane motion and the loss of pairs it causes are NOT modelled" in summary
     stats = json.loads((out / "stats.json").read_text())
     assert stats["cases"][1]["piv"]["name"] == "C4"
@@ -103,3 +107,18 @@ def test_cli_piv_mode_only(device, tmp_path):
     stats = json.loads((out / "stats.json").read_text())
     assert set(stats["cases"][0]) == {"name", "G", "delta_n_max", "piv"}
     assert "No PTV case to compare with" in (out / "summary.md").read_text()
+
+
+def test_verdict_names_the_cases_that_agree_and_those_that_differ():
+    from rimcl.summary import piv_verdict
+
+    def case(name, ratio, optics):
+        both = {"ratio_rms_normalized": ratio, "optics_ratio_rms_normalized": optics}
+        return {"name": name, "piv_vs_ptv": {"magnitude": both}}
+
+    stats = {"cases": [case("C1", 1.5, 1.2), case("C3", 3.0, 0.6), case("C4", 0.25, 0.5)]}
+    line = piv_verdict(stats)
+    assert "errors (PIV/PTV of rms(ε_|u|)/rms(|u|)) **agree** within a factor 2 in C1 (1.5)" in line
+    assert "**differ** in C3 (3.0), C4 (0.25)" in line
+    assert "optics parts (rays only) **agree** within a factor 2 in every case" in line
+    assert piv_verdict({"cases": [{"name": "C1"}]}).startswith("No PTV case")
