@@ -136,7 +136,8 @@ class PivSettings:
             "outlier_eps_px": float(self.outlier_eps),
             "outlier_threshold": float(self.outlier_threshold),
             "subpixel": "3-point Gaussian (parabola where a neighbour is not positive)",
-            "deformation": "symmetric, cubic B-spline images, cubic-spline displacement",
+            "deformation": f"symmetric, B-spline images of order {DEFORM_ORDER}, "
+            "cubic-spline displacement",
             "peak_ratio_exclusion_px": SECOND_PEAK_EXCLUSION,
         }
 
