@@ -46,9 +46,10 @@ def echo_piv_case_lines(stats):
         piv = case["piv"]
         pixels, u3 = piv["displacement_px"], piv["velocity"]["u3"]
         click.echo(
-            f"{'PIV ' + case['name']:>8}  G = {piv['G']:.3g}: {piv['n_used']}/{piv['n_vectors']} "
-            f"vectors, refraction {number(pixels['refraction_rms'])} px rms (truth "
-            f"{number(pixels['truth_rms'])} px), u3 rms(ε)/rms(u) {number(u3['rms_normalized'])}"
+            f"{'PIV ' + case['name']:>8}  G = {number(piv['G'])}: "
+            f"{piv['n_used']}/{piv['n_vectors']} vectors, refraction "
+            f"{number(pixels['refraction_rms'])} px rms (truth {number(pixels['truth_rms'])} "
+            f"px), u3 rms(ε)/rms(u) {number(u3['rms_normalized'])}"
         )
 
 

@@ -687,7 +687,12 @@ def _error_budget(cases):
     panels_count = 1 + len(groups)
     cols = min(panels_count, 3)
     rows = -(-panels_count // cols)
-    text_height = 0.3 + 0.17 * len(cases)
+    verdicts = [c["budget_verdict"]["text"] for c in cases if c.get("budget_verdict")]
+    if not verdicts:
+        verdicts = [
+            "no optics columns in these render files: refraction (total) against the baseline only"
+        ]
+    text_height = 0.3 + 0.17 * len(verdicts)
     figure = Figure(
         figsize=(PANEL_SIZE[0] * cols, PANEL_SIZE[1] * rows + text_height),
         dpi=120,
@@ -728,11 +733,6 @@ def _error_budget(cases):
         _title(axes[index], letter, dict((g, d) for g, _, d in KINEMATIC_BLOCKS)[group])
     text_ax = figure.add_subplot(grid[rows, :])
     text_ax.set_axis_off()
-    verdicts = [c["budget_verdict"]["text"] for c in cases if c.get("budget_verdict")]
-    if not verdicts:
-        verdicts = [
-            "no optics columns in these render files: refraction (total) against the baseline only"
-        ]
     text_ax.text(
         0.0, 1.0, "\n".join(verdicts), va="top", ha="left", fontsize=7, transform=text_ax.transAxes
     )
@@ -783,7 +783,7 @@ def _convergence(cases):
         description = dict((g, d) for g, _, d in KINEMATIC_BLOCKS)[group]
         for col, (statistic, ylabel, text) in enumerate(CONVERGENCE_COLUMNS):
             ax = axes[row, col]
-            series, growing, all_sizes = [], [], set()
+            series, growing, widest = [], [], []
             for case, color in zip(cases, colors, strict=True):
                 convergence = case.get("convergence", {})
                 entry = _dig(convergence, group, component, statistic)
@@ -800,7 +800,7 @@ def _convergence(cases):
                 if not points:
                     continue
                 ns, values, intervals = zip(*points, strict=True)
-                all_sizes.update(ns)
+                widest = max(widest, list(ns), key=lambda sizes: (len(sizes), sizes[-1:]))
                 marker = "^" if flagged else "o"
                 ax.plot(ns, np.abs(values), "-", color=color, lw=1)
                 _errorbars(
@@ -827,7 +827,9 @@ def _convergence(cases):
                 )
             ax.set_xscale("log")
             ax.set_yscale("log")
-            _ticks_at(ax.xaxis, all_sizes)
+            # the sizes of the case with the most subsamples: the sizes of cases of other N
+            # would sit too close to them to be labelled
+            _ticks_at(ax.xaxis, widest)
             ax.set_xlabel("tracers used (nested subsamples)")
             ax.set_ylabel(f"{ylabel}, {component}")
             ax.grid(True, which="major", alpha=0.3)
@@ -927,24 +929,40 @@ def _maps(all_tables, cases):
     return figure, {"panels": panels}
 
 
-#: A case whose 98th percentile of |ΔA/A| is below this is drawn with the small changes.
-LARGE_AREA_CHANGE = 1.0
+#: Cases whose spreads of ΔA/A differ by more than this factor get separate axes.
+REGIME_SPREAD_RATIO = 20.0
+
+
+def _shape_regimes(changes):
+    """Split the cases in two groups at the widest gap of their spreads of ΔA/A.
+
+    The spread is the 98th percentile of ``|ΔA/A|``; the cases are split where two
+    neighbouring spreads differ most, if by more than :data:`REGIME_SPREAD_RATIO`, so
+    that air-like and water-like cases each get axes on their own scale.
+
+    Returns
+    -------
+    list of (str, list of int)
+        ``(name, case indices)`` of each regime drawn.
+    """
+    spreads = [float(np.percentile(np.abs(c), 98)) if c.size else 0.0 for c in changes]
+    order = sorted(range(len(changes)), key=lambda i: spreads[i])
+    floor = min([s for s in spreads if s > 0] or [1.0])
+    logs = [np.log10(max(spreads[i], floor)) for i in order]
+    gaps = np.diff(logs)
+    if gaps.size and gaps.max() > np.log10(REGIME_SPREAD_RATIO):
+        cut = int(np.argmax(gaps)) + 1
+        return [
+            ("small changes", sorted(order[:cut])),
+            ("large changes", sorted(order[cut:])),
+        ]
+    return [("all cases", list(range(len(changes))))]
 
 
 def _tracer_shape(all_tables, cases):
     kept = [kept_rows(tables, tables.tracers) for tables in all_tables]
     changes = [area_changes(table) for table in kept]
-    large = [
-        bool(c.size) and float(np.percentile(np.abs(c), 98)) >= LARGE_AREA_CHANGE for c in changes
-    ]
-    regimes = [
-        (name, [i for i in range(len(cases)) if large[i] == flag])
-        for name, flag in (
-            ("small changes (air-like)", False),
-            ("large changes (water-like)", True),
-        )
-    ]
-    regimes = [(name, members) for name, members in regimes if members]
+    regimes = _shape_regimes(changes)
     figure, axes = _new_figure(2, len(regimes))
     colors = _case_colors(len(cases))
     panels = {}

@@ -173,6 +173,10 @@ class CaseIndex:
         """The field of a stored frame, or interpolated in time when ``frame`` is None."""
         if self.fluid is None:
             return _load_frame(source, frame, time, self.g)
+        if self.difference == 0:
+            # a uniform fluid images every ray to its tracer whatever its index: traced at
+            # n = 1 (G = 0) it is the reference itself, bit for bit
+            return _load_frame(source, frame, time, 0.0)
         # G = 1 gives δn = ρ - mean ρ and n_ref = 1 + mean ρ: the density, at any time
         unit = _load_frame(source, frame, time, 1.0)
         density = unit.delta_n.astype(np.float64) + (unit.n_ref - 1.0)
@@ -819,7 +823,7 @@ def _frame_rows(ids, frames_used, columns, flags, notes, window):
 
     ``columns`` maps a name to an ``(M, N)`` array over the ``M`` evaluation frames
     ``frames_used``; each row's flags and notes are the union over the ``window`` frames
-    its estimate uses, starting at ``frames_used - offset`` (see :func:`_kinematics`).
+    its estimate uses, starting at ``frames_used - offset`` (see :func:`kinematics_tables`).
     """
     frames_used = np.asarray(frames_used)
     first_frames, span = window
@@ -838,8 +842,23 @@ def _frame_rows(ids, frames_used, columns, flags, notes, window):
     return table
 
 
-def _kinematics(ids, positions, truth, flags, notes, dt, time_config):
+def kinematics_tables(ids, positions, truth, flags, notes, dt, time_config):
     """Velocity and acceleration tables of every position kind (DESIGN §6.6, §13).
+
+    Parameters
+    ----------
+    ids : ndarray, shape (N,)
+        Tracer ids.
+    positions : dict of str to ndarray (F, N, 2)
+        Positions per kind (``true``, ``ref``, ``meas``, ``opt``, ``opt_ref``).
+    truth : dict
+        ``velocity`` and ``acceleration``, each ``(F, N, 2)``: ``u`` and ``Du/Dt`` along
+        the true tracks.
+    flags, notes : ndarray, int, shape (F, N)
+    dt : float
+        Frame spacing (time units).
+    time_config : rimcl.config.TimeConfig
+        The fit window and order.
 
     ``velocity``: the paper's forward difference ``(x_{k+1} - x_k)/Δt`` at frames
     ``0 … F-2``, truth ``u(x_k, t_k)``; ``acceleration``: the second difference at frames
@@ -940,7 +959,7 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
         "opt_ref": np.stack([ref["x2_opt"], ref["x3_opt"]], axis=-1),
     }
     truth = {"velocity": reference.true_velocity, "acceleration": reference.true_acceleration}
-    kinematics = _kinematics(ids, positions, truth, flags, notes, setup.dt, setup.time)
+    kinematics = kinematics_tables(ids, positions, truth, flags, notes, setup.dt, setup.time)
     if reference.true_velocity is not None:
         for name, values in (("u", reference.true_velocity), ("a", reference.true_acceleration)):
             tracers[f"{name}2_true"] = rows(values[..., 0])

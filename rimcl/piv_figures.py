@@ -79,7 +79,7 @@ def _summary_against_g(ax, stats, statistic, ylabel, title):
         points = [
             (case["G"], case["velocity"][key][statistic])
             for case in stats
-            if np.isfinite(case["G"]) and case["G"] > 0
+            if case["G"] is not None and case["G"] > 0
         ]
         points = [(g, value) for g, value in points if value]
         g_values = [g for g, _ in points]
@@ -100,7 +100,7 @@ def _stride(shape):
 
 
 def _vectors(cases):
-    """Truth and measured vectors of the strongest case (largest G)."""
+    """Truth and measured vectors of the strongest case (largest Δn_max)."""
     vectors, stats = cases[-1]
     figure, axes = _new_figure(1, 2)
     k = _stride(vectors["x"].shape)
@@ -243,7 +243,7 @@ def _error_pdfs(cases):
     )
     _letter(axes[1, 1], "e")
     ax = axes[1, 2]
-    positive = [s for s in stats if np.isfinite(s["G"]) and s["G"] > 0]
+    positive = [s for s in stats if s["G"] is not None and s["G"] > 0]
     g_values = [s["G"] for s in positive]
     parts = {}
     for key, style, label in (
@@ -273,7 +273,7 @@ def draw_piv_figure(name, cases):
     name : str
         One of :data:`FIGURE_NAMES`.
     cases : list of (dict, dict)
-        ``(vectors, stats)`` per case, sorted by ``G``.
+        ``(vectors, stats)`` per case, sorted by ``delta_n_max``.
 
     Returns
     -------
@@ -291,7 +291,7 @@ def write_piv_figures(cases, out_dir, config=None, overwrite=True):
     Parameters
     ----------
     cases : list of (dict, dict)
-        ``(vectors, stats)`` per case (:mod:`rimcl.piv_study`); sorted here by ``G``.
+        ``(vectors, stats)`` per case (:mod:`rimcl.piv_study`); sorted here by ``delta_n_max``.
     out_dir : str or Path
         Created if missing; receives ``<name>.png``, ``.pdf`` and ``.json``.
     config : dict, optional
@@ -302,7 +302,7 @@ def write_piv_figures(cases, out_dir, config=None, overwrite=True):
     -------
     list of Path
     """
-    cases = sorted(cases, key=lambda case: case[1]["G"])
+    cases = sorted(cases, key=lambda case: case[1]["delta_n_max"])
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     record = versions()

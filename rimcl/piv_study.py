@@ -277,7 +277,7 @@ def case_statistics(render, vectors, settings):
     length = render.scene.depth
     return {
         "name": render.case,
-        "G": render.k_rho,
+        "G": render.k_rho if math.isfinite(render.k_rho) else None,  # fluid cases: none
         "delta_n_max": render.delta_n_max,
         "length_L": length,
         "pixel_size_over_L": render.pixel_size / length,

@@ -111,6 +111,8 @@ KINEMATIC_GROUPS = (
     ("velocity_fit", "u", VELOCITY_COLUMNS, None),
     ("acceleration_fit", "a", ACCELERATION_COLUMNS, None),
 )
+#: Per-frame truth along the tracks (files of many frames): velocity and ``Du/Dt``.
+TRUTH_COLUMNS = ("u2_true", "u3_true", "a2_true", "a3_true")
 RAY_COLUMNS = ("theta0", "deflection", "n_metric", "path_length", "displacement", "status")
 ROOT_ATTRS = ("case", "k_rho", "delta_n_max", "length_L", "pixel_size", "dt", "flag_names")
 
@@ -277,7 +279,9 @@ def load_render(path):
             raise RimclError(f"{path}: root attributes {', '.join(missing)} are missing")
         if "tracers" not in h5file:
             raise RimclError(f"{path}: group 'tracers' is missing (not a rimcl render file?)")
-        tracers = _read_group(h5file, "tracers", TRACER_COLUMNS, path, (OPTICS_COLUMNS["x"],))
+        tracers = _read_group(
+            h5file, "tracers", TRACER_COLUMNS, path, (OPTICS_COLUMNS["x"], TRUTH_COLUMNS)
+        )
         if tracers["id"].size == 0:
             raise RimclError(f"{path}: the tracer table is empty")
         frames = int(np.unique(tracers["frame"]).size)
@@ -997,7 +1001,7 @@ def case_statistics(tables):
     rays_total = int(np.sum(tables.tracers["n_rays"]))
     case = {
         "name": tables.case,
-        "G": tables.k_rho,
+        "G": _finite_or_none(tables.k_rho),
         "delta_n_max": tables.delta_n_max,
         "length_L": tables.length,
         "pixel_size_over_L": tables.pixel_size / tables.length,
@@ -1039,14 +1043,15 @@ def case_statistics(tables):
 
 
 def check_cases(all_tables):
-    """Sort render tables by ``G`` and refuse two files of the same case name."""
+    """Sort render tables by Δn_max and refuse two files of the same case name."""
     if not all_tables:
         raise RimclError("no render files given")
     names = [tables.case for tables in all_tables]
     duplicates = sorted({name for name in names if names.count(name) > 1})
     if duplicates:
         raise RimclError(f"more than one render file for case {', '.join(duplicates)}")
-    return sorted(all_tables, key=lambda tables: tables.k_rho)
+    # by index difference: G cases of one field in order of G, fluid cases in order of ΔT
+    return sorted(all_tables, key=lambda tables: tables.delta_n_max)
 
 
 METHODS = {

@@ -447,6 +447,28 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
     return StudyResult(out_dir, stats, ran, skipped, seconds, True, time.perf_counter() - started)
 
 
+def physical_equivalents(delta_n_max, scene):
+    """What a case's index difference means physically (DESIGN §16): the temperature
+    difference of air and of water (and the salinity difference of salt water) that gives
+    it, at the scene's fluid state (default 20 °C, 532 nm).
+
+    Returns
+    -------
+    dict of str to str
+        ``{"air": "air at 20 °C, ΔT ≈ 26 K", "water": ..., "saltwater": ...}``.
+    """
+    from rimcl.media import Fluid, physical_equivalent
+
+    fluid = scene["fluid"]
+    state = {"temperature_c": fluid["temperature_c"], "wavelength_nm": fluid["wavelength_nm"]}
+    fluids = {
+        "air": Fluid("air", pressure_pa=fluid["pressure_pa"], **state),
+        "water": Fluid("water", **state),
+        "saltwater": Fluid("saltwater", salinity_g_kg=fluid["salinity_g_kg"], **state),
+    }
+    return {name: physical_equivalent(delta_n_max, f).text for name, f in fluids.items()}
+
+
 def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
     """``stats.json``, the figures and ``summary.md`` (last) of finished case files
     (PTV render files, PIV case files).
@@ -456,8 +478,9 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
     dict
         The ``stats.json`` document.
     """
-    from rimcl.figures import write_figures
+    from rimcl.figures import dt_sweep_data, write_dt_sweep_figure, write_figures
     from rimcl.stats import check_cases, compute_stats, load_render, write_json
+    from rimcl.sweep import sweep_stats
 
     config = {"scene": scene, "study_dir": str(out_dir)}
     stats = {"cases": [], "config": config}
@@ -470,8 +493,21 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
             all_tables.append(tables)
         all_tables = check_cases(all_tables)
         stats = compute_stats(all_tables, config=config)
+        for case in stats["cases"]:
+            case["physical_equivalent"] = physical_equivalents(case["delta_n_max"], scene)
         if figures:
             write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
+        multiples = sorted(set(scene["time"]["dt_multiples"]) - {1})
+        if multiples:
+            by_dt = sweep_stats(
+                all_tables, multiples, scene["time"], lambda t: compute_stats(t, config=config)
+            )
+            if by_dt:
+                by_dt[float(all_tables[0].dt)] = stats
+                if figures:
+                    stats["dt_sweep"] = write_dt_sweep_figure(by_dt, out_dir / "figures")
+                else:
+                    stats["dt_sweep"] = dt_sweep_data(by_dt)
     if piv_files:
         from rimcl.piv_study import add_study_results
 

@@ -224,6 +224,48 @@ def _convergence_lines(cases):
     return [*lines, ""]
 
 
+def _physical_lines(cases):
+    """What each case's Δn_max means in air, water and salt water (DESIGN §16)."""
+    if not all("physical_equivalent" in case for case in cases):
+        return []
+    lines = [
+        "## What the cases are physically",
+        "",
+        "The temperature (or salt) difference between the light and the heavy fluid that gives "
+        "each case's Δn_max (IAPWS 1997 water, Ciddor 1996 air, Quan & Fry 1995 salt water).",
+        "",
+    ]
+    for case in cases:
+        equivalents = case["physical_equivalent"]
+        lines.append(
+            f"- {case['name']} (Δn_max {number(case['delta_n_max'])}): "
+            + "; ".join(equivalents[name] for name in ("air", "water", "saltwater"))
+        )
+    return [*lines, ""]
+
+
+def _dt_sweep_lines(sweep):
+    """Where refraction rises above the baseline as the frames move apart."""
+    if not sweep:
+        return []
+    dts = ", ".join(f"{dt:g}" for dt in sweep["dt"])
+    lines = [
+        "## Frame spacing: when refraction dominates",
+        "",
+        f"The same tracks sampled every m-th frame (Δt = {dts}); `figures/dt_sweep.png` draws "
+        "the refraction error and the baseline against Δt. Δt at which rms(ε)/rms(truth) of "
+        "refraction exceeds the baseline's:",
+        "",
+    ]
+    for name, quantities in sweep["cases"].items():
+        parts = []
+        for quantity, entry in quantities.items():
+            where = entry["refraction_dominates_dt"]
+            parts.append(f"{quantity}: " + (", ".join(f"{dt:g}" for dt in where) or "none"))
+        lines.append(f"- {name}: " + "; ".join(parts))
+    return [*lines, ""]
+
+
 def summary_markdown(stats, scene):
     """The study's summary as Markdown, beside the paper's values for air and water.
 
@@ -340,6 +382,8 @@ def summary_markdown(stats, scene):
     ]
     lines += ["", "Tracers left out (a tracer may carry several flags): " + "; ".join(excluded)]
     lines += ["", *_convergence_lines(cases)]
+    lines += _physical_lines(cases)
+    lines += _dt_sweep_lines(stats.get("dt_sweep"))
     lines += [
         "## Against the paper (air C1, water C4)",
         "",

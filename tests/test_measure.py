@@ -1,5 +1,6 @@
 """The synthetic PTV measurement end to end (``rimcl.measure.run_render``), on small fields."""
 
+import dataclasses
 import json
 import tracemalloc
 
@@ -9,7 +10,7 @@ import pytest
 
 from rimcl.camera import PupilCamera, Scene
 from rimcl.centroid import TracerFlag
-from rimcl.config import MeasureConfig
+from rimcl.config import FluidConfig, MeasureConfig
 from rimcl.errors import RimclError
 from rimcl.flow.fieldfile import write_field
 from rimcl.measure import merge_results, run_render, write_frame_image, write_render
@@ -87,6 +88,19 @@ def test_zero_k_rho_measures_exactly_the_reference(blobs_file, device, renderer,
     velocity = result.kinematics["velocity"]
     np.testing.assert_array_equal(velocity["u2_meas"], velocity["u2_ref"])
     np.testing.assert_array_equal(velocity["u2_opt"], velocity["u2_opt_ref"])
+
+
+def test_a_fluid_without_a_temperature_difference_is_the_reference(blobs_file, device):
+    config = MeasureConfig.from_options(device=device, **SMALL)
+    config = dataclasses.replace(config, fluid=FluidConfig(kind="water"))
+    rows = run_render(blobs_file, case="dT=0", config=config).tracers
+    for name in ("x2", "x3", "x2_opt", "x3_opt"):
+        reference = f"{name}_ref" if "opt" in name else f"{name.split('_')[0]}_ref"
+        np.testing.assert_array_equal(
+            rows[name if "opt" in name else f"{name}_meas"], rows[reference]
+        )
+    warm = run_render(blobs_file, case="dT=5", config=config).tracers
+    assert np.nanmax(np.abs(warm["x2_opt"] - warm["x2_opt_ref"])) > 0
 
 
 def test_reference_is_reused_across_cases_and_checked(blobs_file, device):

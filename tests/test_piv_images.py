@@ -271,7 +271,7 @@ def test_figures_of_two_cases(box, device, tmp_path):
         document = json.loads((tmp_path / f"{name}.json").read_text())
         assert document["config"] == {"test": True} and document["panels"]
     pdfs = json.loads((tmp_path / "piv_error_pdfs.json").read_text())["panels"]
-    # sorted by G: the uniform medium first, with every refraction error exactly zero
+    # sorted by Δn_max: the uniform medium first, with every refraction error exactly zero
     assert pdfs["a"]["series"][0]["exactly_zero"]
     assert pdfs["f"]["G"] == [strong.stats["G"]]
     maps = json.loads((tmp_path / "piv_error_maps.json").read_text())["panels"]
