@@ -22,6 +22,7 @@ COMMANDS = {
     "stats": ("rimcl.cli.stats", "stats", "Error statistics and figures from render outputs."),
     "study": ("rimcl.cli.study", "study", "The whole chain over refractive-index cases."),
     "bench": ("rimcl.cli.bench", "bench", "Speed against accuracy of the tracing methods."),
+    "piv": ("rimcl.cli.piv", "piv", "PIV: correlate image pairs; render pairs through a field."),
 }
 
 

@@ -12,6 +12,7 @@ from rimcl.cli.options import (
     device_option,
     handle_errors,
 )
+from rimcl.cli.piv import echo_piv_case_lines
 from rimcl.cli.stats import echo_case_lines
 
 
@@ -48,6 +49,11 @@ def _case_list(_ctx, _param, value):
     type=click.Choice(["numpy"]),
     help="Where tracer images are rendered and located [run.engine].",
 )
+@click.option(
+    "--mode",
+    type=click.Choice(["ptv", "piv", "both"]),
+    help="PTV tracks, PIV frames, or both compared [run.mode].",
+)
 @click.option("--force", is_flag=True, help="Redo every case and the statistics.")
 @click.option("--no-figures", is_flag=True, help="Skip the figures (stats and summary only).")
 @click.option(
@@ -83,6 +89,7 @@ def study(
     print_default_scene,
     preset,
     engine,
+    mode,
     force,
     no_figures,
     field_path,
@@ -129,6 +136,7 @@ def study(
         "integrator.step": step,
         "run.device": device_spec,
         "run.engine": engine,
+        "run.mode": mode,
     }
     scene = load_scene(scene_file, overrides, preset=preset)
     result = run_study(
@@ -139,7 +147,8 @@ def study(
         progress=not no_progress,
         report=click.echo,
     )
-    echo_case_lines(result.stats)
+    echo_case_lines({"cases": [case for case in result.stats["cases"] if "velocity" in case]})
+    echo_piv_case_lines(result.stats)
     click.echo(
         f"{len(result.ran)} cases measured, {len(result.skipped)} kept; "
         f"{Path(out_dir) / 'summary.md'} and stats.json "

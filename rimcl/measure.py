@@ -130,7 +130,7 @@ class RenderResult:
     device: object
 
 
-def _open_source(field, stack):
+def open_source(field, stack):
     """A field file reader: from a path, the shipped sample (None), or an open reader."""
     if field is None:
         from rimcl.flow import sample_path
@@ -194,7 +194,7 @@ class CaseIndex:
         )
 
 
-def _case_of(source, case, k_rho, fluid_config):
+def case_of(source, case, k_rho, fluid_config):
     """The :class:`CaseIndex` of a case; files of δn carry their own index."""
     from rimcl.flow.cases import fluid_case, resolve_k_rho
 
@@ -231,7 +231,7 @@ def _load_frame(source, frame, time, k_rho):
     return source.field(frame, *arguments)
 
 
-def _uniform_like(source):
+def uniform_like(source):
     """A uniform field (n = 1) with the grid's extent and boundary, on 2 nodes per axis.
 
     Tracing through it gives the same floats as through a zero δn on the full grid (the
@@ -650,10 +650,10 @@ def run_render(
     """
     config = MeasureConfig() if config is None else config
     with ExitStack() as stack:
-        source, source_name = _open_source(field, stack)
+        source, source_name = open_source(field, stack)
         if config.box is not None:
             source = CroppedSource(source, config.box)
-        case_index = _case_of(source, case, k_rho, config.fluid)
+        case_index = case_of(source, case, k_rho, config.fluid)
         streams = np.random.SeedSequence(int(config.tracers.seed)).spawn(2)
         setup, calibration = _setup(source, source_name, case_index, config, streams, shard)
         count = len(setup.start_positions)
@@ -694,7 +694,7 @@ def run_render(
             "ray_sample": int(config.run.ray_sample),
             "engine": config.run.engine,
             "tracking_substeps": TRACKING_SUBSTEPS,
-            "reference_step": _reference_step(config.integrator.step, source),
+            "reference_step": reference_step(config.integrator.step, source),
         }
         if calibration is not None:
             run_config["auto"] = calibration
@@ -762,7 +762,7 @@ def _calibrate_interp(setup, case_index, positions):
     return record
 
 
-def _reference_step(step, source):
+def reference_step(step, source):
     """The step of the reference traces: the one the user gave, or the tracer's default
     for this grid at n = 1 (what a zero-G case of the same grid uses)."""
     if step is not None:
@@ -793,12 +793,12 @@ def make_reference(setup, bar=None):
         setup.source, setup.scene, setup.start_positions, setup.times
     )
     setup.timings["track"] += time.perf_counter() - start
-    uniform = _uniform_like(setup.source)
+    uniform = uniform_like(setup.source)
     reference_setup = dataclasses.replace(
         setup,
         trace_options={
             **setup.trace_options,
-            "step": _reference_step(setup.trace_options["step"], setup.source),
+            "step": reference_step(setup.trace_options["step"], setup.source),
         },
     )
     ref = _Pass(REFERENCE_PASS, len(setup.frame_ids), len(setup.start_positions))

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from rimcl.errors import RimclError
 
-_PACKAGES = ("rimcl", "numpy", "scipy", "pyopencl", "h5py", "scikit-image", "click")
+_PACKAGES = ("rimcl", "numpy", "scipy", "pyopencl", "h5py", "scikit-image", "click", "tifffile")
 
 
 def versions():

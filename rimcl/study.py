@@ -12,8 +12,10 @@ A study directory holds:
   case is finished, recording the study's scene. A rerun keeps a case file only after
   :func:`check_case_file` found it readable, complete and made for this scene; anything
   else is measured again, with one line saying why;
+- ``piv/<case>.h5`` with ``run.mode = "piv"`` or ``"both"``: the PIV errors of each case
+  (:mod:`rimcl.piv_study`), kept on a rerun when complete and of the same scene;
 - ``stats.json`` and ``figures/``: statistics and figures of all cases (:mod:`rimcl.stats`,
-  :mod:`rimcl.figures`);
+  :mod:`rimcl.figures`; PIV: a ``piv`` entry per case and ``figures/piv_*``);
 - ``summary.md``: the paper-style table, beside the paper's values for air and water.
   Written last, so its presence (newer than every case file) means the study is complete
   and a rerun only reads ``stats.json``.
@@ -44,7 +46,7 @@ from rimcl.scene import load_scene, scene_text
 from rimcl.summary import summary_markdown
 
 #: Scene keys that do not change the measurement: a study may resume with other values.
-RUN_ONLY_KEYS = (("run", "device"), ("run", "rays_per_batch"))
+RUN_ONLY_KEYS = (("run", "device"), ("run", "rays_per_batch"), ("run", "mode"))
 #: File that marks a directory as a rimcl study (and is locked while a study runs in it).
 MARKER = ".rimcl-study"
 #: Key of a case file's recorded configuration holding the study's scene.
@@ -173,7 +175,7 @@ def _claimed(out_dir):
 def _remove_stale_parts(out_dir):
     """Remove the partial files a killed run left; returns how many."""
     removed = 0
-    for folder in (out_dir, out_dir / "cases", out_dir / "figures"):
+    for folder in (out_dir, out_dir / "cases", out_dir / "figures", out_dir / "piv"):
         if not folder.is_dir():
             continue
         for path in folder.iterdir():
@@ -271,13 +273,17 @@ def expected_rows(scene):
     }
 
 
-def _up_to_date(out_dir, case_files, figures):
+def _up_to_date(out_dir, case_files, figures, mode="ptv"):
     from rimcl.figures import FIGURE_NAMES
+    from rimcl.piv_figures import FIGURE_NAMES as PIV_FIGURE_NAMES
 
     summary, stats = out_dir / "summary.md", out_dir / "stats.json"
     needed = [summary, stats]
+    names = {"ptv": FIGURE_NAMES, "piv": PIV_FIGURE_NAMES}.get(
+        mode, FIGURE_NAMES + PIV_FIGURE_NAMES
+    )
     if figures:
-        needed += [out_dir / "figures" / f"{name}.png" for name in FIGURE_NAMES]
+        needed += [out_dir / "figures" / f"{name}.png" for name in names]
     if not all(path.exists() for path in needed):
         return False
     inputs = [out_dir / "scene.toml", *case_files]
@@ -378,14 +384,16 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
     started = time.perf_counter()
     say = report or (lambda line: None)
     out_dir = Path(out_dir)
-    cases = study_cases(scene)
+    mode = scene["run"]["mode"]
+    all_cases = study_cases(scene)
+    cases = all_cases if mode != "piv" else []
     _check_resources(scene)
     with _claimed(out_dir):
         removed = _remove_stale_parts(out_dir)
         if removed:
             say(f"removed {removed} partial file(s) left by an interrupted run")
         _check_directory(out_dir, scene, force)
-        if cases[0][0] == DELTA_N_CASE:
+        if all_cases[0][0] == DELTA_N_CASE:
             say(f"{scene['field']['path']} stores delta_n: one case, its own index")
         scene_file = _SceneFile(out_dir, scene)
         ran, skipped, seconds = [], [], {}
@@ -417,8 +425,17 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
             ran.append(name)
             say(f"{step}: done in {seconds[name]:.1f} s")
         scene_file.settle()
+        piv_files = []
+        if mode != "ptv":
+            from rimcl.piv_study import run_study_cases
+
+            piv_files, piv_ran = run_study_cases(
+                scene, out_dir, _comparable(scene), all_cases, force=force, report=say
+            )
+            ran += [f"piv/{name}" for name in piv_ran]
+            skipped += [f"piv/{name}" for name, _ in all_cases if name not in piv_ran]
         case_files = [case_path(out_dir, name) for name, _ in cases]
-        if not force and not ran and _up_to_date(out_dir, case_files, figures):
+        if not force and not ran and _up_to_date(out_dir, case_files + piv_files, figures, mode):
             with contextlib.suppress(OSError, ValueError):
                 stats = json.loads((out_dir / "stats.json").read_text())
                 say("statistics, figures and summary are up to date")
@@ -426,7 +443,7 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
                     out_dir, stats, ran, skipped, seconds, False, time.perf_counter() - started
                 )
         say("statistics and figures" if figures else "statistics")
-        stats = write_study_outputs(out_dir, scene, case_files, figures)
+        stats = write_study_outputs(out_dir, scene, case_files, figures, piv_files)
     return StudyResult(out_dir, stats, ran, skipped, seconds, True, time.perf_counter() - started)
 
 
@@ -452,8 +469,9 @@ def physical_equivalents(delta_n_max, scene):
     return {name: physical_equivalent(delta_n_max, f).text for name, f in fluids.items()}
 
 
-def write_study_outputs(out_dir, scene, case_files, figures=True):
-    """``stats.json``, the figures and ``summary.md`` (last) of finished case files.
+def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
+    """``stats.json``, the figures and ``summary.md`` (last) of finished case files
+    (PTV render files, PIV case files).
 
     Returns
     -------
@@ -464,30 +482,36 @@ def write_study_outputs(out_dir, scene, case_files, figures=True):
     from rimcl.stats import check_cases, compute_stats, load_render, write_json
     from rimcl.sweep import sweep_stats
 
-    all_tables = []
-    for path in case_files:
-        tables = load_render(path)
-        if tables.case != path.stem:
-            raise RimclError(f"{path} holds case {tables.case!r}, not {path.stem!r}")
-        all_tables.append(tables)
-    all_tables = check_cases(all_tables)
     config = {"scene": scene, "study_dir": str(out_dir)}
-    stats = compute_stats(all_tables, config=config)
-    for case in stats["cases"]:
-        case["physical_equivalent"] = physical_equivalents(case["delta_n_max"], scene)
-    if figures:
-        write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
-    multiples = sorted(set(scene["time"]["dt_multiples"]) - {1})
-    if multiples:
-        by_dt = sweep_stats(
-            all_tables, multiples, scene["time"], lambda t: compute_stats(t, config=config)
-        )
-        if by_dt:
-            by_dt[float(all_tables[0].dt)] = stats
-            if figures:
-                stats["dt_sweep"] = write_dt_sweep_figure(by_dt, out_dir / "figures")
-            else:
-                stats["dt_sweep"] = dt_sweep_data(by_dt)
+    stats = {"cases": [], "config": config}
+    if case_files:
+        all_tables = []
+        for path in case_files:
+            tables = load_render(path)
+            if tables.case != path.stem:
+                raise RimclError(f"{path} holds case {tables.case!r}, not {path.stem!r}")
+            all_tables.append(tables)
+        all_tables = check_cases(all_tables)
+        stats = compute_stats(all_tables, config=config)
+        for case in stats["cases"]:
+            case["physical_equivalent"] = physical_equivalents(case["delta_n_max"], scene)
+        if figures:
+            write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
+        multiples = sorted(set(scene["time"]["dt_multiples"]) - {1})
+        if multiples:
+            by_dt = sweep_stats(
+                all_tables, multiples, scene["time"], lambda t: compute_stats(t, config=config)
+            )
+            if by_dt:
+                by_dt[float(all_tables[0].dt)] = stats
+                if figures:
+                    stats["dt_sweep"] = write_dt_sweep_figure(by_dt, out_dir / "figures")
+                else:
+                    stats["dt_sweep"] = dt_sweep_data(by_dt)
+    if piv_files:
+        from rimcl.piv_study import add_study_results
+
+        add_study_results(stats, piv_files, out_dir / "figures" if figures else None, config)
     write_json(out_dir / "stats.json", stats, overwrite=True)
     _write_text(out_dir / "summary.md", summary_markdown(stats, scene))
     return stats

@@ -280,6 +280,8 @@ def summary_markdown(stats, scene):
     -------
     str
     """
+    if scene["run"]["mode"] == "piv":
+        return "\n".join([f"# rimcl study: {len(stats['cases'])} cases, PIV", *piv_lines(stats)])
     cases = stats["cases"]
     first = cases[0]
     camera = scene["camera"]
@@ -423,4 +425,114 @@ def summary_markdown(stats, scene):
             rows.append([f"rimcl, {name}", row[2], row[4], *row[5:]])
     lines += _table(header, rows)
     lines += ["", f"Paper: {PAPER_SOURCE}. Where: {PAPER_CITATIONS}", ""]
-    return "\n".join(lines)
+    return "\n".join(lines + piv_lines(stats))
+
+
+#: PIV and PTV refraction errors of a case "agree" when the ratio of their
+#: rms(ε_|u|)/rms(|u|) lies within this factor either way.
+PIV_AGREEMENT_FACTOR = 2.0
+
+
+def _agreement(stats, key):
+    """Cases whose PIV/PTV ratio ``key`` of ``|u|`` lies within the factor, and the others."""
+    agree, differ = [], []
+    for case in stats["cases"]:
+        ratio = case.get("piv_vs_ptv", {}).get("magnitude", {}).get(key)
+        if ratio is not None:
+            within = 1 / PIV_AGREEMENT_FACTOR <= ratio <= PIV_AGREEMENT_FACTOR
+            (agree if within else differ).append(f"{case['name']} ({significant(ratio, 2)})")
+    return agree, differ
+
+
+def _agreement_sentence(agree, differ, what):
+    factor = f"a factor {PIV_AGREEMENT_FACTOR:g}"
+    if not differ:
+        return f"{what} **agree** within {factor} in every case: {', '.join(agree)}."
+    if not agree:
+        return f"{what} **differ** by more than {factor}: {', '.join(differ)}."
+    return (
+        f"{what} **agree** within {factor} in {', '.join(agree)} and **differ** in "
+        f"{', '.join(differ)}."
+    )
+
+
+def piv_verdict(stats):
+    """One line: do the PIV and PTV refraction errors of ``|u|`` agree, case by case (and
+    their optics parts, where the PTV cases have them)?"""
+    agree, differ = _agreement(stats, "ratio_rms_normalized")
+    if not agree and not differ:
+        return 'No PTV case to compare with (run.mode = "piv").'
+    line = "**Verdict:** " + _agreement_sentence(
+        agree, differ, "PIV and PTV errors (PIV/PTV of rms(ε_|u|)/rms(|u|))"
+    )
+    agree, differ = _agreement(stats, "optics_ratio_rms_normalized")
+    if agree or differ:
+        line += " " + _agreement_sentence(agree, differ, "Their optics parts (rays only)")
+    return line
+
+
+def piv_lines(stats):
+    """The PIV section of ``summary.md`` (no lines without PIV results): what was
+    measured, the errors per case beside PTV's, and :func:`piv_verdict`."""
+    cases = [case for case in stats["cases"] if "piv" in case]
+    if not cases:
+        return []
+    first = cases[0]["piv"]
+    settings = first["piv"]
+    lines = [
+        "",
+        "## PIV beside PTV",
+        "",
+        f"PIV frames of {first['n_tracers']} tracers across a Gaussian light sheet "
+        f"(pixel = {first['pixel_size_over_L']:.3g} L), Δt = {first['dt']:.3g}, "
+        f"{settings['passes']} passes down to {settings['window']} px windows "
+        f"(overlap {settings['overlap']:g}); cases in `piv/<case>.h5`, figures "
+        f"`figures/piv_*`. Motion: {first['motion']}.",
+        "",
+        "Refraction error of a vector: measured through the field minus measured through a "
+        "uniform medium on the same tracers (pixels, rms over the vectors used); *optics*: "
+        "the window average of the rays' image-point shifts; *baseline*: the uniform-medium "
+        "vector minus the window-averaged truth (the PIV method's own error). Relative "
+        "errors with their bootstrap 95 % intervals (each vector one sample: overlapping "
+        "windows share tracers, so the intervals are too narrow); `stats.json`: `piv` and "
+        "`piv_vs_ptv` per case.",
+        "",
+    ]
+    header = [
+        "case",
+        "G",
+        "vectors used",
+        "truth rms (px)",
+        "refraction rms (px)",
+        "optics rms (px)",
+        "baseline rms (px)",
+        "PIV rms(ε)/rms(u3)",
+        "PIV rms(ε)/rms(|u|)",
+        "PTV rms(ε)/rms(|u|)",
+        "PIV/PTV",
+        "optics PIV/PTV",
+    ]
+    rows = []
+    for case in cases:
+        piv = case["piv"]
+        pixels = piv["displacement_px"]
+        compared = case.get("piv_vs_ptv", {}).get("magnitude", {})
+        rows.append(
+            [
+                case["name"],
+                number(piv["G"]),
+                f"{piv['n_used']}/{piv['n_vectors']}",
+                number(pixels["truth_rms"]),
+                number(pixels["refraction_rms"]),
+                number(pixels["optics_rms"]),
+                number(pixels["baseline_rms"]),
+                _percent_of(piv["velocity"]["u3"], "rms_normalized"),
+                _percent_of(piv["velocity"]["magnitude"], "rms_normalized"),
+                _percent_of(case["velocity"]["magnitude"], "rms_normalized")
+                if "velocity" in case
+                else "n/a",
+                number(compared.get("ratio_rms_normalized")),
+                number(compared.get("optics_ratio_rms_normalized")),
+            ]
+        )
+    return [*lines, *_table(header, rows), "", piv_verdict(stats), ""]

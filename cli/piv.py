@@ -1,0 +1,326 @@
+"""``rimcl piv``: correlate image pairs (any PIV images), render pairs through a field."""
+
+import click
+import numpy as np
+
+from rimcl.cli.options import (
+    COUNT,
+    FINITE,
+    INDEX,
+    NON_NEGATIVE,
+    POSITIVE,
+    case_option,
+    device_option,
+    field_option,
+    handle_errors,
+    k_rho_option,
+    overwrite_option,
+    parse_step,
+    precision_option,
+    seed_option,
+    step_option,
+)
+from rimcl.summary import number
+
+window_option = click.option(
+    "--window",
+    type=COUNT,
+    default=32,
+    show_default=True,
+    help="Interrogation window of the last pass (px).",
+)
+overlap_option = click.option(
+    "--overlap",
+    type=NON_NEGATIVE,
+    default=0.5,
+    show_default=True,
+    help="Window overlap (fraction).",
+)
+
+
+def echo_piv_case_lines(stats):
+    """One line per case of a study's PIV results: vectors used, errors in pixels and u3."""
+    for case in stats["cases"]:
+        if "piv" not in case:
+            continue
+        piv = case["piv"]
+        pixels, u3 = piv["displacement_px"], piv["velocity"]["u3"]
+        click.echo(
+            f"{'PIV ' + case['name']:>8}  G = {number(piv['G'])}: "
+            f"{piv['n_used']}/{piv['n_vectors']} vectors, refraction "
+            f"{number(pixels['refraction_rms'])} px rms (truth {number(pixels['truth_rms'])} "
+            f"px), u3 rms(ε)/rms(u) {number(u3['rms_normalized'])}"
+        )
+
+
+@click.group()
+def piv():
+    """PIV: cross-correlation of image pairs, and image pairs rendered through a field."""
+
+
+@piv.command()
+@click.argument("image_a", type=click.Path(dir_okay=False))
+@click.argument("image_b", type=click.Path(dir_okay=False))
+@click.option(
+    "-o", "--output", required=True, type=click.Path(dir_okay=False), help="Output HDF5 file."
+)
+@window_option
+@overlap_option
+@click.option(
+    "--passes", type=COUNT, default=3, show_default=True, help="Passes (2+: window deformation)."
+)
+@click.option(
+    "--first-window",
+    type=COUNT,
+    default=None,
+    help="Window of the first pass (px) [default: --window]; shrinks to --window.",
+)
+@click.option(
+    "--outlier-eps",
+    type=POSITIVE,
+    default=0.1,
+    show_default=True,
+    help="eps of the normalized median test (px).",
+)
+@click.option(
+    "--outlier-threshold",
+    type=POSITIVE,
+    default=2.0,
+    show_default=True,
+    help="Threshold of the normalized median test.",
+)
+@overwrite_option
+@handle_errors
+def analyze(
+    image_a,
+    image_b,
+    output,
+    window,
+    overlap,
+    passes,
+    first_window,
+    outlier_eps,
+    outlier_threshold,
+    overwrite,
+):
+    """Correlate two grey TIFF frames A and B into a displacement field (HDF5).
+
+    Vectors are at window centres, x along image columns and y along rows (pixels; pixel
+    (row i, column j) covers [j, j+1) x [i, i+1)); dx, dy move B relative to A.
+
+    \b
+    Example:
+      rimcl piv analyze run_field_A.tif run_field_B.tif -o vectors.h5 --window 32 --passes 3
+    """
+    from rimcl.piv import PivSettings, analyze_files
+
+    settings = PivSettings(
+        window=window,
+        overlap=overlap,
+        passes=passes,
+        first_window=first_window,
+        outlier_eps=outlier_eps,
+        outlier_threshold=outlier_threshold,
+    )
+    result = analyze_files(image_a, image_b, output, settings, overwrite=overwrite)
+    rows, cols = result.dx.shape
+    click.echo(
+        f"{rows} x {cols} vectors ({result.window} px windows, overlap {overlap:g}), "
+        f"{int(np.count_nonzero(~result.valid))} outliers replaced"
+    )
+    click.echo(
+        f"mean displacement dx {np.nanmean(result.dx):.4g} px, dy {np.nanmean(result.dy):.4g} px"
+    )
+    times = ", ".join(f"{seconds:.3f}" for seconds in result.pass_seconds)
+    click.echo(f"seconds per pass: {times}")
+    click.echo(f"wrote {output}")
+
+
+@piv.command()
+@field_option
+@case_option
+@k_rho_option
+@click.option(
+    "--pixels", type=COUNT, default=512, show_default=True, help="Pixels across the field of view."
+)
+@click.option(
+    "--density",
+    type=POSITIVE,
+    default=0.03,
+    show_default=True,
+    help="Particle images per pixel in the sheet.",
+)
+@click.option(
+    "--diameter",
+    type=POSITIVE,
+    default=3.0,
+    show_default=True,
+    help="Particle image diameter d = 4σ (px).",
+)
+@click.option(
+    "--sheet-thickness",
+    type=POSITIVE,
+    default=None,
+    help="Light sheet 1/e² thickness (field length units) [default: 8 pixels].",
+)
+@click.option("--bit-depth", type=click.IntRange(8, 16), default=16, show_default=True)
+@click.option(
+    "--peak-fraction",
+    type=POSITIVE,
+    default=0.5,
+    show_default=True,
+    help="Peak of an isolated in-focus particle, fraction of full scale.",
+)
+@click.option(
+    "--camera",
+    type=click.Choice(["plane", "pupil"]),
+    default="plane",
+    show_default=True,
+    help="plane: M×M rays to the exit plane (the paper); pupil: rays over a lens aperture.",
+)
+@click.option("--fan", type=COUNT, default=8, show_default=True, help="M of the plane camera.")
+@click.option(
+    "--pupil-rays", type=COUNT, default=64, show_default=True, help="Rays per tracer (pupil)."
+)
+@click.option("--aperture-diameter", type=POSITIVE, default=None, help="Pupil diameter.")
+@click.option("--focal-length", type=POSITIVE, default=None, help="With --f-number: D = F / N.")
+@click.option("--f-number", type=POSITIVE, default=None, help="With --focal-length: D = F / N.")
+@click.option("--camera-distance", type=POSITIVE, default=None, help="Sheet to pupil [4 L1].")
+@click.option("--view-angle", type=FINITE, default=0.0, show_default=True, help="Degrees.")
+@click.option(
+    "--start-frame", type=INDEX, default=0, show_default=True, help="Field frame of exposure A."
+)
+@click.option(
+    "--dt",
+    type=POSITIVE,
+    default=0.1,
+    show_default=True,
+    help="Time between exposures (0.1 on the sample: 1.5 px rms at 512 px).",
+)
+@click.option("--x-sheet", type=FINITE, default=None, help="Sheet centre x1 [default: scene].")
+@window_option
+@overlap_option
+@click.option(
+    "--interp",
+    type=click.Choice(["trilinear", "texture", "bspline3"]),
+    default="trilinear",
+    show_default=True,
+    help="Interpolation of the gridded field.",
+)
+@precision_option
+@step_option
+@device_option
+@seed_option
+@click.option(
+    "-o",
+    "--output",
+    "prefix",
+    default="piv",
+    show_default=True,
+    help="Output prefix: PREFIX_{field,uniform}_{A,B}.tif and PREFIX_truth.h5.",
+)
+@overwrite_option
+@handle_errors
+def render(
+    field_path,
+    case,
+    k_rho,
+    pixels,
+    density,
+    diameter,
+    sheet_thickness,
+    bit_depth,
+    peak_fraction,
+    camera,
+    fan,
+    pupil_rays,
+    aperture_diameter,
+    focal_length,
+    f_number,
+    camera_distance,
+    view_angle,
+    start_frame,
+    dt,
+    x_sheet,
+    window,
+    overlap,
+    interp,
+    precision,
+    step,
+    device_spec,
+    seed,
+    prefix,
+    overwrite,
+):
+    """PIV frame pairs through the field and through a uniform medium, with the truth.
+
+    The truth file holds every tracer's positions at both exposures and the true
+    displacement averaged over the interrogation windows of --window/--overlap.
+
+    \b
+    Examples:
+      rimcl piv render --case C1 -o air          # air_field_A.tif ... air_truth.h5
+      rimcl piv render --case C4 --camera pupil --pupil-rays 32 -o water
+      rimcl piv analyze water_field_A.tif water_field_B.tif -o water_vectors.h5
+    """
+    from rimcl.config import CameraConfig, IntegratorConfig, RunConfig
+    from rimcl.flow.fieldfile import case_arguments
+    from rimcl.piv import PivSettings
+    from rimcl.piv_images import (
+        PivConfig,
+        PivImaging,
+        check_outputs,
+        run_piv_render,
+        write_piv_render,
+    )
+
+    check_outputs(prefix, overwrite)
+    piv_config = PivConfig(
+        imaging=PivImaging(
+            pixels=pixels,
+            density=density,
+            diameter=diameter,
+            sheet_thickness=sheet_thickness,
+            bit_depth=bit_depth,
+            peak_fraction=peak_fraction,
+        ),
+        settings=PivSettings(window=window, overlap=overlap),
+        dt=dt,
+        start_frame=start_frame,
+        x_sheet=x_sheet,
+        seed=seed,
+    )
+    camera_config = CameraConfig(
+        kind=camera,
+        fan=fan,
+        pupil_rays=pupil_rays,
+        aperture_diameter=aperture_diameter,
+        focal_length=focal_length,
+        f_number=f_number,
+        distance=camera_distance,
+        view_angle=view_angle,
+    )
+    case, k_rho = case_arguments(field_path, case, k_rho)
+    result = run_piv_render(
+        field_path,
+        case=case,
+        k_rho=k_rho,
+        piv=piv_config,
+        camera=camera_config,
+        integrator=IntegratorConfig(interp=interp, precision=precision, step=parse_step(step)),
+        run=RunConfig(device=device_spec),
+    )
+    paths = write_piv_render(prefix, result, overwrite=overwrite)
+    truth = result.reference.truth
+    click.echo(
+        f"case {result.case} (G = {result.k_rho:.4g}, Δn_max = {result.delta_n_max:.3g}): "
+        f"{result.config['n_tracers']} tracers × {result.camera.rays_per_tracer} rays, "
+        f"frames {' x '.join(map(str, result.field.images.shape[1:]))} px"
+    )
+    rms = [np.sqrt(np.nanmean(truth[name] ** 2)) for name in ("dx", "dy")]
+    click.echo(
+        f"true displacement over {window} px windows: rms dx {rms[0]:.3g} px, dy {rms[1]:.3g} px"
+    )
+    click.echo(f"rays through the field: {result.field.ray_counts}")
+    click.echo(f"motion: {result.motion}")
+    click.echo("wrote " + ", ".join(str(path) for path in paths.values()))

@@ -1,0 +1,124 @@
+"""PIV in the study (run.mode, [piv]): case files, resuming, stats.json, summary, CLI."""
+
+import json
+
+import h5py
+import pytest
+from click.testing import CliRunner
+
+from rimcl.cli.main import cli
+from rimcl.errors import RimclError
+from rimcl.piv_study import STUDY_RECORD, configs_from_scene, study_case_path
+from rimcl.scene import load_scene
+from rimcl.study import run_study
+
+#: two cases on the sample: a handful of PTV tracers, 64 px PIV frames of 4 rays per tracer
+TINY = {
+    "cases.names": ["C0", "C4"],
+    "tracers.count": 8,
+    "camera.fan": 4,
+    "piv.pixels": 64,
+    "piv.rays": 4,
+    "piv.window": 16,
+}
+
+
+def tiny_scene(device, **overrides):
+    return load_scene(None, {**TINY, "run.device": device.name, **overrides})
+
+
+@pytest.fixture(scope="module")
+def both(device, tmp_path_factory):
+    out = tmp_path_factory.mktemp("study_both")
+    lines = []
+    result = run_study(
+        tiny_scene(device, **{"run.mode": "both"}), out, figures=False, report=lines.append
+    )
+    return out, result, lines
+
+
+def test_scene_keys_make_the_piv_configuration(device):
+    scene = tiny_scene(device, **{"piv.dt": 0.06, "camera.kind": "pupil", "tracers.seed": 3})
+    piv, configs = configs_from_scene(scene)
+    assert piv.imaging.pixels == 64 and piv.settings.window == 16 and piv.dt == 0.06
+    assert piv.seed == 3 and piv.start_frame == 0
+    assert configs["camera"].kind == "pupil" and configs["camera"].pupil_rays == 4
+    assert configs_from_scene(tiny_scene(device))[1]["camera"].fan == 2  # plane: √4 per side
+    with pytest.raises(RimclError, match=r"run\.mode .* must be one of ptv, piv, both"):
+        tiny_scene(device, **{"run.mode": "pvi"})
+    with pytest.raises(RimclError, match=r"unknown key piv\.windows"):
+        load_scene(None, {"piv.windows": 16})
+
+
+def test_both_writes_piv_cases_beside_ptv(both):
+    out, result, lines = both
+    cases = {case["name"]: case for case in result.stats["cases"]}
+    assert set(cases) == {"C0", "C4"}
+    for name, case in cases.items():
+        assert study_case_path(out, name).exists()
+        # the PTV entry and the PIV one side by side, in the same summary shapes
+        assert set(case["piv"]["velocity"]["u3"]) == set(case["velocity"]["u3"])
+        compared = case["piv_vs_ptv"]["magnitude"]
+        assert (
+            compared["piv_rms_normalized"] == case["piv"]["velocity"]["magnitude"]["rms_normalized"]
+        )
+        assert compared["ptv_rms_normalized"] == case["velocity"]["magnitude"]["rms_normalized"]
+        assert (
+            compared["ptv_optics_rms_normalized"]
+            == (case["optics"]["velocity"]["magnitude"]["rms_normalized"])
+        )
+    # refraction grows with G: C4 bends the vectors far more than C0
+    c0, c4 = (cases[name]["piv"]["displacement_px"]["refraction_rms"] for name in ("C0", "C4"))
+    assert c4 > 100 * c0 > 0
+    assert "in-plane only" in cases["C0"]["piv"]["motion"]
+    summary = (out / "summary.md").read_text()
+    assert "## PIV beside PTV" in summary and "**Verdict:** PIV and PTV errors" in summary
+    assert "out-of-plane motion and the loss of pairs it causes are NOT modelled" in summary
+    stats = json.loads((out / "stats.json").read_text())
+    assert stats["cases"][1]["piv"]["name"] == "C4"
+    assert any("[PIV 2/2] C4: done" in line for line in lines)
+
+
+def test_rerun_keeps_current_piv_cases_and_redoes_foreign_ones(both, device):
+    out, _, _ = both
+    kept = study_case_path(out, "C0")
+    stamp = kept.stat().st_mtime_ns
+    foreign = study_case_path(out, "C4")
+    with h5py.File(foreign, "a") as h5:
+        h5.attrs[STUDY_RECORD] = json.dumps({"another": "scene"})
+    lines = []
+    run_study(tiny_scene(device, **{"run.mode": "both"}), out, figures=False, report=lines.append)
+    assert kept.stat().st_mtime_ns == stamp
+    assert any("[PIV 1/2] C0: finished earlier, kept" in line for line in lines)
+    assert any("[PIV 2/2] C4: imaging and correlating" in line for line in lines)
+    # PTV cases are kept too: switching the mode is not another scene
+    assert any("C0: finished earlier, kept" in line and "PIV" not in line for line in lines)
+
+
+def test_cli_piv_mode_only(device, tmp_path):
+    scene_file = tmp_path / "scene.toml"
+    scene_file.write_text("[piv]\npixels = 64\nrays = 4\nwindow = 16\n[tracers]\ncount = 8\n")
+    out = tmp_path / "study"
+    args = ["study", str(scene_file), "--mode", "piv", "--cases", "C1", "-o", str(out)]
+    result = CliRunner().invoke(cli, [*args, "--no-figures", "--device", device.name])
+    assert result.exit_code == 0, result.output
+    assert "PIV C1" in result.output and "refraction" in result.output
+    assert not (out / "cases" / "C1.h5").exists() and study_case_path(out, "C1").exists()
+    stats = json.loads((out / "stats.json").read_text())
+    assert set(stats["cases"][0]) == {"name", "G", "delta_n_max", "piv"}
+    assert "No PTV case to compare with" in (out / "summary.md").read_text()
+
+
+def test_verdict_names_the_cases_that_agree_and_those_that_differ():
+    from rimcl.summary import piv_verdict
+
+    def case(name, ratio, optics):
+        both = {"ratio_rms_normalized": ratio, "optics_ratio_rms_normalized": optics}
+        return {"name": name, "piv_vs_ptv": {"magnitude": both}}
+
+    stats = {"cases": [case("C1", 1.5, 1.2), case("C3", 3.0, 0.6), case("C4", 0.25, 0.5)]}
+    line = piv_verdict(stats)
+    assert "errors (PIV/PTV of rms(ε_|u|)/rms(|u|)) **agree** within a factor 2 in C1 (1.5)" in line
+    assert "**differ** in C3 (3.0), C4 (0.25)" in line
+    assert "optics parts (rays only) **agree** within a factor 2 in every case" in line
+    assert piv_verdict({"cases": [{"name": "C1"}]}).startswith("No PTV case")
