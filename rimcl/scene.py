@@ -571,6 +571,14 @@ def _keys():
         ),
         SceneKey(
             "run",
+            "numerics",
+            True,
+            "bool",
+            "with the figures, the paper's Appendix A check: one case (C1) at half the step "
+            "and on every second grid node, its |ε_x| PDFs in figures/numerics.png",
+        ),
+        SceneKey(
+            "run",
             "ray_sample",
             20000,
             "int",

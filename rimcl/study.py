@@ -46,7 +46,7 @@ from rimcl.scene import load_scene, scene_text
 from rimcl.summary import summary_markdown
 
 #: Scene keys that do not change the measurement: a study may resume with other values.
-RUN_ONLY_KEYS = (("run", "device"), ("run", "rays_per_batch"), ("run", "mode"))
+RUN_ONLY_KEYS = (("run", "numerics"), ("run", "device"), ("run", "rays_per_batch"), ("run", "mode"))
 #: File that marks a directory as a rimcl study (and is locked while a study runs in it).
 MARKER = ".rimcl-study"
 #: Key of a case file's recorded configuration holding the study's scene.
@@ -469,6 +469,34 @@ def physical_equivalents(delta_n_max, scene):
     return {name: physical_equivalent(delta_n_max, f).text for name, f in fluids.items()}
 
 
+def _numerics(scene, case, out_dir, versions):
+    """Run the Appendix A check, draw its figure, and return its numbers for stats.json."""
+    from rimcl.figures import write_numerics_figure
+    from rimcl.numerics import numerical_convergence
+
+    numerics = numerical_convergence(scene, case)
+    write_numerics_figure(numerics, out_dir / "figures", versions)
+    runs = numerics["runs"]
+    return {
+        "case": numerics["case"],
+        "median_over_L": {name: run["median_over_L"] for name, run in runs.items()},
+        "optics_median_over_L": {name: run["optics_median_over_L"] for name, run in runs.items()},
+        **{key: value for key, value in numerics.items() if key.endswith("ratio")},
+    }
+
+
+def _numerics_case(scene, names):
+    """The case of the Appendix A check (C1, else the first Gladstone–Dale case), or None
+    when the scene asks for none or has no such case."""
+    from rimcl.flow.cases import CASES
+
+    if not scene["run"]["numerics"]:
+        return None
+    if "C1" in names:
+        return "C1"
+    return next((name for name in names if name in CASES or name.startswith("G=")), None)
+
+
 def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
     """``stats.json``, the figures and ``summary.md`` (last) of finished case files
     (PTV render files, PIV case files).
@@ -497,6 +525,9 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
             case["physical_equivalent"] = physical_equivalents(case["delta_n_max"], scene)
         if figures:
             write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
+        numerics_case = _numerics_case(scene, [t.case for t in all_tables])
+        if figures and numerics_case is not None:
+            stats["numerics"] = _numerics(scene, numerics_case, out_dir, stats["versions"])
         multiples = sorted(set(scene["time"]["dt_multiples"]) - {1})
         if multiples:
             by_dt = sweep_stats(

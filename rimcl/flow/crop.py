@@ -106,3 +106,58 @@ class CroppedSource:
 
     def describe(self):
         return {"box": self.box.tolist(), "shape_n3_n2_n1": list(self.shape)}
+
+
+class StridedSource:
+    """Every ``stride``-th node of ``source`` along each axis: the same flow on a coarser
+    grid (the paper's Appendix A compares two grid resolutions).
+
+    The field and its gradient are computed on the full grid and then sampled, so the
+    coarse grid carries exact node values; only the interpolation between nodes is coarser.
+    A periodic box keeps its period (its node count must divide by ``stride``).
+    """
+
+    def __init__(self, source, stride=2):
+        stride = int(stride)
+        counts = np.asarray(source.shape)
+        if stride < 1:
+            raise RimclError(f"the grid stride must be at least 1, got {stride}")
+        if source.boundary == "periodic" and np.any(counts % stride):
+            raise RimclError(
+                f"a periodic grid of {tuple(counts)} nodes does not divide by {stride}"
+            )
+        self.source = source
+        self.stride = stride
+        self._slices = (slice(None, None, stride),) * 3
+        self.origin = np.asarray(source.origin, dtype=np.float64)
+        self.spacing = np.asarray(source.spacing, dtype=np.float64) * stride
+        self.shape = tuple(len(range(0, int(n), stride)) for n in counts)
+        self.boundary = source.boundary
+        if min(self.shape) < 2:
+            raise RimclError(f"stride {stride} leaves fewer than 2 nodes along an axis")
+
+    path = CroppedSource.path
+    kind = CroppedSource.kind
+    times = CroppedSource.times
+    n_frames = CroppedSource.n_frames
+    has_velocity = CroppedSource.has_velocity
+    field = CroppedSource.field
+    field_at = CroppedSource.field_at
+
+    def _cut(self, whole):
+        return Field.from_arrays(
+            whole.delta_n[self._slices],
+            spacing=self.spacing,
+            origin=self.origin,
+            n_ref=whole.n_ref,
+            gradient=whole.gradient[(*self._slices, slice(None))],
+            boundary=self.boundary,
+            attrs={**whole.attrs, "stride": self.stride},
+        )
+
+    def sheet_velocity(self, time, x1):
+        """The sheet velocity on the coarse nodes: shape (n3, n2, 2)."""
+        return self.source.sheet_velocity(time, x1)[:: self.stride, :: self.stride]
+
+    def describe(self):
+        return {"stride": self.stride, "shape_n3_n2_n1": list(self.shape)}
