@@ -321,6 +321,23 @@ def _keys():
             "rays traced per batch (bounds the memory)",
             positive=True,
         ),
+        SceneKey(
+            "run",
+            "scheduler",
+            "",
+            "str",
+            'Dask scheduler measuring the cases: "" = this process; "local:N" = N worker '
+            'processes here; "tcp://HOST:PORT" = a running scheduler (rimcl[distributed])',
+        ),
+        SceneKey(
+            "run",
+            "shard_tracers",
+            100,
+            "int",
+            "tracers per Dask task (one case, one shard of tracers) with run.scheduler; "
+            "the results do not depend on it",
+            positive=True,
+        ),
     )
 
 

@@ -30,7 +30,12 @@ from rimcl.provenance import atomic_path
 from rimcl.scene import load_scene, scene_text
 
 #: Scene keys that do not change the measurement: a study may resume with other values.
-RUN_ONLY_KEYS = (("run", "device"), ("run", "rays_per_batch"))
+RUN_ONLY_KEYS = (
+    ("run", "device"),
+    ("run", "rays_per_batch"),
+    ("run", "scheduler"),
+    ("run", "shard_tracers"),
+)
 
 PAPER_SOURCE = (
     "H. Li, A. Fischer, M. Avila, D. Xu, *Measurement error of tracer-based velocimetry in "
@@ -158,7 +163,9 @@ def _up_to_date(out_dir, case_files, figures):
     return summary.stat().st_mtime >= max(path.stat().st_mtime for path in inputs)
 
 
-def run_study(scene, out_dir, *, force=False, figures=True, progress=False, report=None):
+def run_study(
+    scene, out_dir, *, force=False, figures=True, progress=False, report=None, scheduler=None
+):
     """Run every case of a scene, then the statistics, figures and summary.
 
     Parameters
@@ -175,6 +182,10 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
         Show progress bars.
     report : callable, optional
         Called with one line of text per step (the CLI echoes them).
+    scheduler : str, optional
+        Measure the cases on Dask (``"local:N"`` or a scheduler address; default: the
+        scene's ``run.scheduler``, "" = this process): see :mod:`rimcl.distributed`.
+        ``case_seconds`` are then worker seconds.
 
     Returns
     -------
@@ -197,8 +208,17 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
         _write_text(scene_path, text)
     names = scene["cases"]["names"]
     ran, skipped, seconds = [], [], {}
+    todo = names
+    scheduler = scheduler or scene["run"]["scheduler"]
+    if scheduler:
+        from rimcl.distributed import measure_cases
+
+        ran, skipped, seconds = measure_cases(
+            scene, out_dir, scheduler, force=force, progress=progress, report=say
+        )
+        todo = []  # the cluster measured every case
     references = {}  # threshold -> reference images (they depend on it, not on the case)
-    for index, name in enumerate(names, start=1):
+    for index, name in enumerate(todo, start=1):
         path = case_path(out_dir, name)
         if path.exists() and not force:
             skipped.append(name)
