@@ -52,7 +52,6 @@ try:
 except ImportError:  # the optional extra is missing: connect() says so in one line
     WorkerPlugin = object
 
-PLUGIN_NAME = "rimcl"
 SHARD_DIR = "shards"
 #: Host memory (bytes) a worker may keep of a case's loaded frames for its next shard.
 FRAME_CACHE_BYTES = 4 << 30
@@ -287,12 +286,13 @@ class RimclPlugin(WorkerPlugin):
         See :data:`FRAME_CACHE_BYTES`.
     """
 
-    name = PLUGIN_NAME
-
     def __init__(self, field_path, device_spec=None, frame_cache_bytes=FRAME_CACHE_BYTES):
         self.field_path = field_path
         self.device_spec = device_spec
         self.frame_cache_bytes = frame_cache_bytes
+        # one plugin per field and device: studies of other fields sharing a scheduler
+        # keep theirs, and the same study connecting again replaces its own
+        self.name = plugin_name(field_path, device_spec)
 
     def setup(self, worker):
         """Choose the device, create its context, open the field file."""
@@ -313,25 +313,32 @@ class RimclPlugin(WorkerPlugin):
         self.file.close()
 
 
-def _plugin(worker=None):
+def plugin_name(field_path, device_spec=None):
+    """Name of the :class:`RimclPlugin` of a field file and a scene's ``run.device``."""
+    return f"rimcl:{field_path}:{device_spec or ''}"
+
+
+def _plugin(name, worker=None):
     from distributed import get_worker
 
-    plugin = (worker or get_worker()).plugins.get(PLUGIN_NAME)
+    plugin = (worker or get_worker()).plugins.get(name)
     if plugin is None or not hasattr(plugin, "source"):
-        raise RimclError("this Dask worker has no working rimcl plugin (see the worker's log)")
+        raise RimclError(f"this Dask worker has no working plugin {name} (see its log)")
     return plugin
 
 
-def worker_description(dask_worker):
-    """The device name of a worker (``Client.run`` passes the worker)."""
-    return _plugin(dask_worker).device.name.strip()
+def worker_description(name, dask_worker):
+    """The device name of a worker's plugin ``name`` (``Client.run`` passes the worker)."""
+    return _plugin(name, dask_worker).device.name.strip()
 
 
-def measure_shard(scene, case, shard, path, reference_path=None, wait_for=None):
+def measure_shard(plugin, scene, case, shard, path, reference_path=None, wait_for=None):
     """One task: measure tracers ``shard`` of ``case`` on this worker into ``path``.
 
     Parameters
     ----------
+    plugin : str
+        Name of the worker's :class:`RimclPlugin` (:func:`plugin_name`).
     scene : dict
         The study's scene.
     case : str
@@ -358,7 +365,7 @@ def measure_shard(scene, case, shard, path, reference_path=None, wait_for=None):
     start = time.perf_counter()
     if Path(path).exists():
         return {"path": path, "seconds": 0.0, "measured": False}
-    plugin = _plugin()
+    plugin = _plugin(plugin)
     with plugin.lock:
         config = MeasureConfig.from_scene(scene, case)
         config = dataclasses.replace(
@@ -422,7 +429,9 @@ def connect(spec, field_path="", device_spec=None, report=None):
 
     Yields
     ------
-    distributed.Client
+    client : distributed.Client
+    plugin : str
+        Name of the workers' :class:`RimclPlugin`, for :func:`measure_shard`.
     """
     say = report or (lambda line: None)
     kind, value = parse_scheduler(spec)
@@ -452,14 +461,15 @@ def connect(spec, field_path="", device_spec=None, report=None):
                 raise RimclError(f"cannot reach the Dask scheduler at {value}: {exc}") from None
             say(f"Dask: scheduler {value}; dashboard {client.dashboard_link}")
         field = str(Path(field_path).resolve()) if field_path else ""
-        client.register_plugin(RimclPlugin(field, device_spec or None))
-        devices = sorted(client.run(worker_description).values())
+        plugin = RimclPlugin(field, device_spec or None)
+        client.register_plugin(plugin)
+        devices = sorted(client.run(worker_description, plugin.name).values())
         if devices:
             kinds = {name: devices.count(name) for name in devices}
             say(f"{len(devices)} workers: " + ", ".join(f"{n} x {d}" for d, n in kinds.items()))
         else:
             say("no worker has joined yet: the tasks wait for workers")
-        yield client
+        yield client, plugin.name
 
 
 def _remove_orphans(directory):
@@ -520,8 +530,9 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
     for name in todo:
         (out_dir / SHARD_DIR / name).mkdir(parents=True, exist_ok=True)
 
-    with connect(scheduler, scene["field"]["path"], scene["run"]["device"], say) as client:
-        futures, waiting = _submit(client, scene, out_dir, names, todo, shards)
+    field, device = scene["field"]["path"], scene["run"]["device"]
+    with connect(scheduler, field, device, say) as (client, plugin):
+        futures, waiting = _submit(client, plugin, scene, out_dir, names, todo, shards)
         pending = {name: len(tasks) for name, tasks in waiting.items()}
         worker_seconds = dict.fromkeys(todo, 0.0)
 
@@ -549,7 +560,7 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
 
             for future in as_completed(futures):
                 name = futures[future]
-                done = future.result()  # a task's error stops the study here
+                done = _result(future, name)
                 worker_seconds[name] += done["seconds"]
                 pending[name] -= 1
                 if bar is not None:
@@ -563,12 +574,22 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
     return ran, skipped, seconds
 
 
+def _result(future, case):
+    """A task's result; its error stops the study, as one line unless it is rimcl's own."""
+    try:
+        return future.result()
+    except RimclError:
+        raise
+    except Exception as exc:  # a task lost on too many workers (KilledWorker), cancelled...
+        raise RimclError(f"a Dask task of case {case} failed: {type(exc).__name__}: {exc}") from exc
+
+
 def shard_paths(out_dir, case, shards):
     """Files of every shard of one case, in tracer order."""
     return [shard_path(out_dir, case, shard) for shard in shards]
 
 
-def _submit(client, scene, out_dir, names, todo, shards):
+def _submit(client, plugin, scene, out_dir, names, todo, shards):
     """One task per missing shard; a (threshold, shard)'s first task measures the reference.
 
     Returns
@@ -595,6 +616,7 @@ def _submit(client, scene, out_dir, names, todo, shards):
             reference_path, wait_for = (None, None) if provider is None else provider
             future = client.submit(
                 measure_shard,
+                plugin,
                 scene,
                 name,
                 shard,

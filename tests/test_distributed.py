@@ -25,6 +25,8 @@ from rimcl.distributed import (
     worker_index,
 )
 from rimcl.errors import RimclError
+from rimcl.flow import sample_path
+from rimcl.flow.fieldfile import FieldFile
 from rimcl.scene import load_scene, scene_text
 from rimcl.study import case_path, run_study
 
@@ -119,6 +121,22 @@ def test_worker_index_and_device(device, monkeypatch):
     monkeypatch.setenv("RIMCL_DEVICE", "no-such-device")
     with pytest.raises(RimclError, match="no OpenCL device matches 'no-such-device'"):
         worker_device(1, device.name)
+
+
+def test_a_worker_keeps_the_frames_of_the_latest_case():
+    from rimcl.distributed import _CachedFrames
+
+    with FieldFile(sample_path()) as file:
+        frames = _CachedFrames(file, budget=1 << 30)
+        assert frames.shape == file.shape and frames.path == file.path
+        first = frames.field(0, 0.01)
+        assert frames.field(0, 0.01) is first  # the next shard of the case: no reload
+        assert frames.field(1, 0.01) is not first
+        other = frames.field(0, 0.02)  # another case: the first one's frames are dropped
+        np.testing.assert_array_equal(other.delta_n, 2 * first.delta_n)
+        assert frames.field(0, 0.01) is not first
+        tight = _CachedFrames(file, budget=first.delta_n.nbytes)  # too small for a frame
+        assert tight.field(0, 0.01) is not tight.field(0, 0.01)
 
 
 def test_without_dask_a_scheduler_is_one_clear_error(device, tmp_path, monkeypatch):
