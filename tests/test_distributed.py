@@ -5,10 +5,12 @@ One tiny study (2 cases, 20 tracers in shards of 7, a 6x6 fan, 256 pixels) is me
 once in this process as the answer every distributed run must give bit for bit.
 """
 
+import dataclasses
 import json
 import os
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import h5py
 import numpy as np
@@ -16,17 +18,22 @@ import pytest
 from click.testing import CliRunner
 
 from rimcl.cli.main import cli
+from rimcl.config import MeasureConfig
 from rimcl.distributed import (
+    _reference_for,
+    connect,
     parse_scheduler,
     read_shard,
     shard_path,
     shard_ranges,
     worker_device,
     worker_index,
+    write_shard,
 )
 from rimcl.errors import RimclError
 from rimcl.flow import sample_path
 from rimcl.flow.fieldfile import FieldFile
+from rimcl.measure import run_render
 from rimcl.scene import load_scene, scene_text
 from rimcl.study import case_path, run_study
 
@@ -121,6 +128,32 @@ def test_worker_index_and_device(device, monkeypatch):
     monkeypatch.setenv("RIMCL_DEVICE", "no-such-device")
     with pytest.raises(RimclError, match="no OpenCL device matches 'no-such-device'"):
         worker_device(1, device.name)
+
+
+def test_a_shard_file_holds_its_tables_and_reference(device, tmp_path):
+    config = MeasureConfig.from_scene(tiny_scene(device), "C1")
+    config = dataclasses.replace(config, run=dataclasses.replace(config.run, device=device))
+    result = run_render(None, case="C1", config=config, shard=(7, 14))
+    path = tmp_path / "7-14.h5"
+    write_shard(path, result)
+    back = read_shard(path)
+    for group in ("tracers", "velocity", "acceleration", "rays"):
+        for name, values in getattr(result, group).items():
+            np.testing.assert_array_equal(getattr(back, group)[name], values, err_msg=name)
+    assert back.ray_attrs == result.ray_attrs and back.config["shard"] == [7, 14]
+    stored, made = back.reference, result.reference
+    assert stored.key == made.key and stored.ray_counts == made.ray_counts
+    for name in ("tracks", "true_velocity", "outside"):
+        np.testing.assert_array_equal(getattr(stored, name), getattr(made, name))
+    for name, values in made.images.items():
+        np.testing.assert_array_equal(stored.images[name], values, err_msg=name)
+    worker = SimpleNamespace(device=device)
+    assert _reference_for(path, worker).key == made.key
+    with h5py.File(path, "a") as h5:  # as if another kind of device had measured it
+        key = json.loads(h5["reference"].attrs["key"])
+        key["trace"]["device"]["device"] = "another GPU"
+        h5["reference"].attrs["key"] = json.dumps(key)
+    assert _reference_for(path, worker) is None
 
 
 def test_a_worker_keeps_the_frames_of_the_latest_case():
@@ -222,7 +255,16 @@ def test_a_killed_worker_loses_nothing_and_a_rerun_redoes_only_missing_shards(
     assert_same_study(single, out)
 
 
-def test_one_worker_gives_the_same_numbers(single, device, tmp_path):
-    out = tmp_path / "study"
-    run_study(tiny_scene(device), out, figures=False, scheduler="local:1")
+def test_one_worker_gives_the_same_numbers(single, device, tmp_path, monkeypatch):
+    # the default nannies of the cluster fixture put it into this process's environment
+    monkeypatch.delenv("MALLOC_TRIM_THRESHOLD_", raising=False)
+    lines = []
+    with connect("local:1", "", device.name, report=lines.append) as (client, _):
+        assert lines[-1] == f"1 workers: 1 x {device.name.strip()}"
+        # glibc keeps its dynamic mmap threshold in the workers (see connect)
+        assert client.run(os.environ.get, "MALLOC_TRIM_THRESHOLD_") == {
+            address: None for address in client.scheduler_info()["workers"]
+        }
+        out = tmp_path / "study"
+        run_study(tiny_scene(device), out, figures=False, scheduler=client.scheduler.address)
     assert_same_study(single, out)
