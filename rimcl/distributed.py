@@ -122,7 +122,25 @@ def _read_reference(group):
     )
 
 
-def write_shard(path, result):
+def scene_stamp(scene):
+    """What a shard file must have been measured for: the scene without the keys that do
+    not change the numbers (:data:`rimcl.study.RUN_ONLY_KEYS`), as JSON text."""
+    from rimcl.study import _comparable
+
+    return json.dumps(_comparable(scene), sort_keys=True)
+
+
+def _stamp_of(path):
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            return h5.attrs.get("study_scene")
+    except OSError:
+        return None
+
+
+def write_shard(path, result, stamp=""):
     """Write one shard's :class:`rimcl.measure.RenderResult` and its reference, atomically.
 
     Parameters
@@ -130,6 +148,8 @@ def write_shard(path, result):
     path : str or Path
     result : RenderResult
         From :func:`rimcl.measure.run_render` with ``shard=``.
+    stamp : str
+        :func:`scene_stamp` of the study (root attribute ``study_scene``).
     """
     import h5py
 
@@ -138,6 +158,7 @@ def write_shard(path, result):
     with atomic_path(path, overwrite=True) as tmp:
         write_render(tmp, result, overwrite=True)
         with h5py.File(tmp, "a") as h5:
+            h5.attrs["study_scene"] = stamp
             _write_reference(h5.create_group("reference"), result.reference)
 
 
@@ -154,7 +175,7 @@ def read_shard(path):
 
     from rimcl.measure import RenderResult
 
-    provenance = ("config", "versions", "device", "timings_s")
+    provenance = ("config", "versions", "device", "timings_s", "study_scene")
     try:
         h5 = h5py.File(path, "r")
     except OSError as exc:
@@ -389,7 +410,7 @@ def measure_shard(plugin, scene, case, shard, path, reference_path=None, wait_fo
         result = run_render(
             plugin.source, case=case, config=config, reference=reference, shard=shard
         )
-        write_shard(path, result)
+        write_shard(path, result, scene_stamp(scene))
     return {"path": path, "seconds": time.perf_counter() - start, "measured": True}
 
 
@@ -544,10 +565,12 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
             todo.append(name)
     if not todo:
         return ran, skipped, seconds
-    if force:
-        for name in todo:
-            for path in shard_paths(out_dir, name, shards):
-                path.unlink(missing_ok=True)
+    stamp = scene_stamp(scene)
+    for name in names:
+        for path in shard_paths(out_dir, name, shards):
+            # another scene's shards (left by a forced single-process run) are not kept
+            if path.exists() and ((force and name in todo) or _stamp_of(path) != stamp):
+                path.unlink()
     for name in todo:
         (out_dir / SHARD_DIR / name).mkdir(parents=True, exist_ok=True)
 

@@ -6,6 +6,8 @@ A study directory holds:
   refused unless ``force``);
 - ``cases/<case>.h5``: one ``rimcl render`` file per case, written atomically when the
   case is finished; a rerun skips the cases whose file exists;
+- ``shards/<case>/<first>-<stop>.h5``: with a Dask scheduler (``run.scheduler``), the
+  finished shards of tracers, merged into the case files (:mod:`rimcl.distributed`);
 - ``stats.json`` and ``figures/``: statistics and figures of all cases (:mod:`rimcl.stats`,
   :mod:`rimcl.figures`);
 - ``summary.md``: the paper-style table, beside the paper's values for air and water.

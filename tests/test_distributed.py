@@ -24,6 +24,7 @@ from rimcl.distributed import (
     connect,
     parse_scheduler,
     read_shard,
+    scene_stamp,
     shard_path,
     shard_ranges,
     worker_device,
@@ -63,7 +64,7 @@ def single(device, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def cluster():
-    """Two single-threaded worker processes on loopback, shared by the tests below."""
+    """Two single-threaded worker processes on loopback, whose client a test can use."""
     with (
         distributed.LocalCluster(
             n_workers=2,
@@ -243,14 +244,17 @@ def test_a_killed_worker_loses_nothing_and_a_rerun_redoes_only_missing_shards(
     assert result.ran == CASES
     assert_same_study(single, out)
 
-    # a killed client: shard files but no case file; a lost shard file
+    # a killed client: shard files but no case file; a lost shard file, and one of
+    # another scene (as a forced single-process run of another scene leaves them)
     case_path(out, "C4").unlink()
     shard_path(out, "C4", (7, 14)).unlink()
+    with h5py.File(shard_path(out, "C4", (14, 20)), "a") as h5:
+        h5.attrs["study_scene"] = scene_stamp(tiny_scene(device, **{"tracers.seed": 1}))
     kept = shard_path(out, "C4", (0, 7)).stat().st_mtime_ns
     lines = []
     again = run_study(scene, out, figures=False, scheduler="local:1", report=lines.append)
     assert again.skipped == ["C1"] and again.ran == ["C4"]
-    assert "[2/2] C4: 3 shard files merged (1 measured now" in "\n".join(lines)
+    assert "[2/2] C4: 3 shard files merged (2 measured now" in "\n".join(lines)
     assert shard_path(out, "C4", (0, 7)).stat().st_mtime_ns == kept
     assert_same_study(single, out)
 
