@@ -580,28 +580,31 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
         pending = {name: len(tasks) for name, tasks in waiting.items()}
         worker_seconds = dict.fromkeys(todo, 0.0)
 
-        def finish(name):
-            merge_shards(case_path(out_dir, name), shard_paths(out_dir, name, shards))
-            _remove_orphans(out_dir / SHARD_DIR / name)
-            ran.append(name)
-            seconds[name] = worker_seconds[name]
-            say(
-                f"[{position[name]}/{len(names)}] {name}: {len(shards)} shard files merged "
-                f"({len(waiting[name])} measured now, {worker_seconds[name]:.1f} s of "
-                "worker time)"
-            )
-
-        for name in todo:
-            if not pending[name]:
-                finish(name)
         bar = None
         if progress and futures:
             from tqdm.auto import tqdm
 
             bar = tqdm(total=len(futures), unit="shard", desc="shards", disable=None)
+
+        def finish(name):
+            merge_shards(case_path(out_dir, name), shard_paths(out_dir, name, shards))
+            _remove_orphans(out_dir / SHARD_DIR / name)
+            ran.append(name)
+            seconds[name] = worker_seconds[name]
+            line = (
+                f"[{position[name]}/{len(names)}] {name}: {len(shards)} shard files merged "
+                f"({len(waiting[name])} measured now, {worker_seconds[name]:.1f} s of "
+                "worker time)"
+            )
+            with contextlib.nullcontext() if bar is None else bar.external_write_mode():
+                say(line)  # above the bar, not through it
+
         try:
             from distributed import as_completed
 
+            for name in todo:
+                if not pending[name]:
+                    finish(name)
             for future in as_completed(futures):
                 name = futures[future]
                 done = _result(future, name)
