@@ -81,6 +81,11 @@ def _case_list(_ctx, _param, value):
 )
 @click.option("--step", type=POSITIVE, help="Integration step in t = s/n [integrator.step].")
 @device_option
+@click.option(
+    "--scheduler",
+    metavar="local:N|tcp://HOST:PORT",
+    help="Measure on Dask: N worker processes here, or a running scheduler [run.scheduler].",
+)
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
 @handle_errors
 def study(
@@ -104,6 +109,7 @@ def study(
     precision,
     step,
     device_spec,
+    scheduler,
     no_progress,
 ):
     """Run the whole chain (trace, render, centroid, track, statistics, figures) over the
@@ -137,6 +143,7 @@ def study(
         "run.device": device_spec,
         "run.engine": engine,
         "run.mode": mode,
+        "run.scheduler": scheduler,
     }
     scene = load_scene(scene_file, overrides, preset=preset)
     result = run_study(

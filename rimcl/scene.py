@@ -602,6 +602,23 @@ def _keys():
             "case both ways, compared in summary.md",
             choices=("ptv", "piv", "both"),
         ),
+        SceneKey(
+            "run",
+            "scheduler",
+            "",
+            "str",
+            'Dask scheduler measuring the cases: "" = this process; "local:N" = N worker '
+            'processes here; "tcp://HOST:PORT" = a running scheduler (rimcl[distributed])',
+        ),
+        SceneKey(
+            "run",
+            "shard_tracers",
+            100,
+            "int",
+            "tracers per Dask task (one case, one shard of tracers) with run.scheduler; "
+            "the results do not depend on it",
+            positive=True,
+        ),
         *_piv_keys(),
     )
 

@@ -14,6 +14,8 @@ A study directory holds:
   else is measured again, with one line saying why;
 - ``piv/<case>.h5`` with ``run.mode = "piv"`` or ``"both"``: the PIV errors of each case
   (:mod:`rimcl.piv_study`), kept on a rerun when complete and of the same scene;
+- ``shards/<case>/<first>-<stop>.h5``: with a Dask scheduler (``run.scheduler``), the
+  finished shards of tracers, merged into the case files (:mod:`rimcl.distributed`);
 - ``stats.json`` and ``figures/``: statistics and figures of all cases (:mod:`rimcl.stats`,
   :mod:`rimcl.figures`; PIV: a ``piv`` entry per case and ``figures/piv_*``);
 - ``summary.md``: the paper-style table, beside the paper's values for air and water.
@@ -46,7 +48,14 @@ from rimcl.scene import load_scene, scene_text
 from rimcl.summary import summary_markdown
 
 #: Scene keys that do not change the measurement: a study may resume with other values.
-RUN_ONLY_KEYS = (("run", "numerics"), ("run", "device"), ("run", "rays_per_batch"), ("run", "mode"))
+RUN_ONLY_KEYS = (
+    ("run", "numerics"),
+    ("run", "device"),
+    ("run", "rays_per_batch"),
+    ("run", "mode"),
+    ("run", "scheduler"),
+    ("run", "shard_tracers"),
+)
 #: File that marks a directory as a rimcl study (and is locked while a study runs in it).
 MARKER = ".rimcl-study"
 #: Key of a case file's recorded configuration holding the study's scene.
@@ -85,7 +94,7 @@ class StudyResult:
     wall_seconds: float
 
 
-def _comparable(scene):
+def comparable_scene(scene):
     trimmed = json.loads(json.dumps(scene))
     for section, name in RUN_ONLY_KEYS:
         trimmed.get(section, {}).pop(name, None)
@@ -117,8 +126,8 @@ def _check_directory(out_dir, scene, force):
     if force:
         return
     if scene_path.exists():
-        previous = _comparable(_read_scene_file(scene_path))
-        changes = _differences(previous, _comparable(scene))
+        previous = comparable_scene(_read_scene_file(scene_path))
+        changes = _differences(previous, comparable_scene(scene))
         if changes:
             raise RimclError(
                 f"{out_dir} holds a study of another scene ({'; '.join(changes)}); "
@@ -247,7 +256,7 @@ def check_case_file(path, scene, case):
     recorded = tables.provenance.get("config", {}).get(SCENE_RECORD)
     if not isinstance(recorded, dict):
         return "records no study scene (written by rimcl render or an older rimcl)"
-    changes = _differences(recorded, _comparable(scene))
+    changes = _differences(recorded, comparable_scene(scene))
     if changes:
         shown = "; ".join(changes[:3]) + ("; ..." if len(changes) > 3 else "")
         return f"made for another scene ({shown})"
@@ -341,8 +350,8 @@ class _SceneFile:
         previous = None
         if self.path.exists():
             with contextlib.suppress(RimclError):
-                previous = _comparable(_read_scene_file(self.path))
-        if previous != _comparable(self.scene):
+                previous = comparable_scene(_read_scene_file(self.path))
+        if previous != comparable_scene(self.scene):
             # statistics and figures of another scene's case files: never beside this one
             for name in ("summary.md", "stats.json"):
                 (self.path.parent / name).unlink(missing_ok=True)
@@ -350,7 +359,9 @@ class _SceneFile:
         _write_text(self.path, self.text)
 
 
-def run_study(scene, out_dir, *, force=False, figures=True, progress=False, report=None):
+def run_study(
+    scene, out_dir, *, force=False, figures=True, progress=False, report=None, scheduler=None
+):
     """Run every case of a scene, then the statistics, figures and summary.
 
     Parameters
@@ -367,6 +378,10 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
         Show progress bars.
     report : callable, optional
         Called with one line of text per step (the CLI echoes them).
+    scheduler : str, optional
+        Measure the cases on Dask (``"local:N"`` or a scheduler address; default: the
+        scene's ``run.scheduler``, "" = this process): see :mod:`rimcl.distributed`.
+        ``case_seconds`` are then worker seconds.
 
     Returns
     -------
@@ -397,8 +412,18 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
             say(f"{scene['field']['path']} stores delta_n: one case, its own index")
         scene_file = _SceneFile(out_dir, scene)
         ran, skipped, seconds = [], [], {}
+        todo = cases
+        scheduler = scheduler or scene["run"]["scheduler"]
+        if scheduler and cases:
+            from rimcl.distributed import measure_cases
+
+            scene_file.settle()
+            ran, skipped, seconds = measure_cases(
+                scene, out_dir, scheduler, force=force, progress=progress, report=say
+            )
+            todo = []  # the cluster measured every case
         references = {}  # threshold -> reference images (they depend on it, not on the case)
-        for index, (name, case) in enumerate(cases, start=1):
+        for index, (name, case) in enumerate(todo, start=1):
             path = case_path(out_dir, name)
             step = f"[{index}/{len(cases)}] {name}"
             reason = None if force or not path.exists() else check_case_file(path, scene, name)
@@ -418,7 +443,7 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
                 progress=progress,
             )
             references[threshold] = result.reference
-            result.config[SCENE_RECORD] = _comparable(scene)
+            result.config[SCENE_RECORD] = comparable_scene(scene)
             scene_file.settle()
             write_render(path, result, overwrite=True)
             seconds[name] = time.perf_counter() - case_start
@@ -430,7 +455,7 @@ def run_study(scene, out_dir, *, force=False, figures=True, progress=False, repo
             from rimcl.piv_study import run_study_cases
 
             piv_files, piv_ran = run_study_cases(
-                scene, out_dir, _comparable(scene), all_cases, force=force, report=say
+                scene, out_dir, comparable_scene(scene), all_cases, force=force, report=say
             )
             ran += [f"piv/{name}" for name in piv_ran]
             skipped += [f"piv/{name}" for name, _ in all_cases if name not in piv_ran]
