@@ -31,6 +31,7 @@ import dataclasses
 import time
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from rimcl.centroid import CENTROID_WEIGHTS, NO_POSITION, TracerFlag, locate, not_found
 from rimcl.errors import RimclError
@@ -183,39 +184,44 @@ def image_batch(
     timings = {"render": 0.0, "centroid": 0.0} if timings is None else timings
     renderer = imaging.renderer
     per_image = imaging.scaling == "per_image"
-    for k in range(count):
-        tracer_flags = TracerFlag(int(flags[k]))
-        scale = None if scales is None or per_image else float(scales[k])
-        saturated = False
-        if not usable[k].any():
-            blob, window = not_found(tracer_flags | TracerFlag.NO_RAYS), None
-        else:
-            start = time.perf_counter()
-            pixels = renderer.to_pixels(points[k][usable[k]])
-            window = renderer.window_for(pixels)
-            raw, outside = renderer.render(pixels, weights[k][usable[k]], window)
-            if outside:
-                tracer_flags |= TracerFlag.RAYS_OUTSIDE_WINDOW
-            if scale is None:
-                scale = imaging.sensor.scale_for(raw)
-            key = None if noise is None else NoiseKey(noise[0], noise[1], int(noise[2][k]))
-            counts, saturated = imaging.sensor.digitize(raw, scale, window.row0, window.col0, key)
-            out["peak"][k] = float(np.max(raw)) * scale
-            middle = time.perf_counter()
-            blob = locate(counts, imaging.threshold, imaging.centroid_weights)
-            timings["render"] += middle - start
-            timings["centroid"] += time.perf_counter() - middle
-            if canvas is not None:
-                canvas.add(window, counts)
-        tracer_flags |= blob.flags
-        if saturated:
-            tracer_flags |= TracerFlag.SATURATED
-        if not blob.flags & NO_POSITION:
-            position = renderer.to_sheet([window.col0 + blob.col, window.row0 + blob.row])
-            out["x2"][k], out["x3"][k] = position
-        out["area"][k] = blob.area
-        out["perimeter"][k] = blob.perimeter
-        out["circularity"][k] = blob.circularity
-        out["flags"][k] = int(tracer_flags)
-        out["scale"][k] = np.nan if scale is None else scale
+    # one small matrix product per tracer: a multi-threaded BLAS spends 10x longer
+    # starting its threads than computing (measured on 2 cores)
+    with threadpool_limits(limits=1, user_api="blas"):
+        for k in range(len(points)):
+            tracer_flags = TracerFlag(int(flags[k]))
+            scale = None if scales is None or per_image else float(scales[k])
+            saturated = False
+            if not usable[k].any():
+                blob, window = not_found(tracer_flags | TracerFlag.NO_RAYS), None
+            else:
+                start = time.perf_counter()
+                pixels = renderer.to_pixels(points[k][usable[k]])
+                window = renderer.window_for(pixels)
+                raw, outside = renderer.render(pixels, weights[k][usable[k]], window)
+                if outside:
+                    tracer_flags |= TracerFlag.RAYS_OUTSIDE_WINDOW
+                if scale is None:
+                    scale = imaging.sensor.scale_for(raw)
+                key = None if noise is None else NoiseKey(noise[0], noise[1], int(noise[2][k]))
+                counts, saturated = imaging.sensor.digitize(
+                    raw, scale, window.row0, window.col0, key
+                )
+                out["peak"][k] = float(np.max(raw)) * scale
+                middle = time.perf_counter()
+                blob = locate(counts, imaging.threshold, imaging.centroid_weights)
+                timings["render"] += middle - start
+                timings["centroid"] += time.perf_counter() - middle
+                if canvas is not None:
+                    canvas.add(window, counts)
+            tracer_flags |= blob.flags
+            if saturated:
+                tracer_flags |= TracerFlag.SATURATED
+            if not blob.flags & NO_POSITION:
+                position = renderer.to_sheet([window.col0 + blob.col, window.row0 + blob.row])
+                out["x2"][k], out["x3"][k] = position
+            out["area"][k] = blob.area
+            out["perimeter"][k] = blob.perimeter
+            out["circularity"][k] = blob.circularity
+            out["flags"][k] = int(tracer_flags)
+            out["scale"][k] = np.nan if scale is None else scale
     return out
