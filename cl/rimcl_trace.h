@@ -396,16 +396,51 @@ RIMCL_INLINE lane_result trace_lanes(FIELD_ARGS, lvec3 origin_hi, lvec3 origin_l
     return out;
 }
 
-/* Write lane k of a traced work-item as the exit record of trace.cl: RAY_OUT_STRIDE
- * floats at `out` (R and T as float (hi, lo) pairs, path integrals) and its ray_info. */
-RIMCL_INLINE void store_lane_record(__global float *out, __global int4 *info,
-                                    const lane_result *res, const int k)
+/* Lane k of a traced work-item as the exit record of trace.cl: RAY_OUT_STRIDE floats
+ * (R and T as float (hi, lo) pairs, path integrals) and its ray_info. */
+RIMCL_INLINE void lane_record(const lane_result *res, const int k, float *record, int4 *info)
 {
     real r_hi[3] = {LANE(res->s.r.x, k), LANE(res->s.r.y, k), LANE(res->s.r.z, k)};
     real t_hi[3] = {LANE(res->s.t.x, k), LANE(res->s.t.y, k), LANE(res->s.t.z, k)};
 #if RIMCL_PRECISION == RIMCL_F32C
     real r_lo[3] = {LANE(res->s.r_lo.x, k), LANE(res->s.r_lo.y, k), LANE(res->s.r_lo.z, k)};
     real t_lo[3] = {LANE(res->s.t_lo.x, k), LANE(res->s.t_lo.y, k), LANE(res->s.t_lo.z, k)};
+#endif
+    for (int q = 0; q < 3; ++q) {
+        record[q] = (float)r_hi[q];
+        record[6 + q] = (float)t_hi[q];
+#if RIMCL_PRECISION == RIMCL_F32C
+        record[3 + q] = r_lo[q];
+        record[9 + q] = t_lo[q];
+#elif RIMCL_PRECISION == RIMCL_F64
+        record[3 + q] = (float)(r_hi[q] - (double)(float)r_hi[q]);
+        record[9 + q] = (float)(t_hi[q] - (double)(float)t_hi[q]);
+#else
+        record[3 + q] = 0.0f;
+        record[9 + q] = 0.0f;
+#endif
+    }
+    record[12] = (float)(LANE(res->sums.s, k) - LANE(res->sums.s_c, k));
+    record[13] = (float)(LANE(res->sums.opl, k) - LANE(res->sums.opl_c, k));
+    record[14] = (float)LANE(res->sums.nperp.x, k);
+    record[15] = (float)LANE(res->sums.nperp.y, k);
+    record[16] = (float)LANE(res->sums.nperp.z, k);
+    *info = (int4)((int)LANE_I(res->steps, k), (int)LANE_I(res->status, k),
+                   (int)LANE_I(res->rejected, k), (int)LANE_I(res->evaluations, k));
+}
+
+/* Write lane k's exit record (lane_record) to `out` and `info`. */
+RIMCL_INLINE void store_lane_record(__global float *out, __global int4 *info,
+                                    const lane_result *res, const int k)
+{
+    float record[RAY_OUT_STRIDE];
+    int4 lane_info;
+    lane_record(res, k, record, &lane_info);
+    for (int q = 0; q < RAY_OUT_STRIDE; ++q)
+        out[q] = record[q];
+    *info = lane_info;
+}
+
 #endif
     for (int q = 0; q < 3; ++q) {
         out[q] = (float)r_hi[q];

@@ -17,7 +17,7 @@ from rimcl.render import Renderer
 
 DEFAULT_RAYS_PER_BATCH = 1 << 17  # rays traced per batch: ~40 MB of host memory
 DEFAULT_RAY_SAMPLE = 20_000
-ENGINES = ("numpy",)
+ENGINES = ("device", "numpy")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -174,8 +174,10 @@ class RunConfig:
     Attributes
     ----------
     device : str or pyopencl.Device, optional
-    engine : {"numpy"}
-        Where images are rendered and located.
+    engine : {"device", "numpy"}
+        Where images are rendered and located: on the OpenCL device with the trace
+        (:mod:`rimcl.engine`), or tracer by tracer in NumPy (:mod:`rimcl.imaging`, the
+        reference).
     rays_per_batch : int
         Rays traced per batch; bounds the memory.
     ray_sample : int
@@ -185,7 +187,7 @@ class RunConfig:
     """
 
     device: object = None
-    engine: str = "numpy"
+    engine: str = "device"
     rays_per_batch: int = DEFAULT_RAYS_PER_BATCH
     ray_sample: int = DEFAULT_RAY_SAMPLE
     frame_image: bool = False

@@ -193,6 +193,8 @@ class Setup:
         The case-independent configuration (a reusable reference must match it).
     timings : dict of str to float
         Seconds per stage, filled as the stages run.
+    engine : rimcl.engine.DeviceEngine or None
+        The device pipeline (``engine = "device"``); None for the NumPy engine.
     """
 
     source: object
@@ -207,6 +209,7 @@ class Setup:
     batch: int
     key: dict
     timings: dict
+    engine: object = None
 
 
 def _frames_of(source, time_config):
@@ -266,6 +269,10 @@ def _setup(source, source_name, g, config, streams):
         key={},
         timings={"track": 0.0, "trace": 0.0, "render": 0.0, "centroid": 0.0},
     )
+    if config.run.engine == "device":
+        from rimcl.engine import DeviceEngine
+
+        setup.engine = DeviceEngine(camera, scene, imaging, device, setup.batch)
     calibration = None
     if integrator.interp == "auto":
         calibration = _calibrate_interp(setup, g)
@@ -330,6 +337,9 @@ def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None
         ``sampler`` (a :class:`_RaySampler`), ``canvas`` (a :class:`FrameImage`) and
         ``bar`` (a progress bar), each optional.
     """
+    if setup.engine is not None:
+        setup.engine.image_frame(setup, pass_, frame, field, positions, scales, extras)
+        return
     extras = extras or {}
     camera, scene, timings = setup.camera, setup.scene, setup.timings
     rays = camera.rays_per_tracer
