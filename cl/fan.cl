@@ -164,7 +164,7 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
 #else
         const int collected = 1;
 #endif
-        const int usable = (status == RAY_OK) && collected;
+        const int usable = (status == RAY_OK) & collected;
         const double pixel_size = camera[CAM_PIXEL_SIZE];
         ray_pixel[ray] =
             usable ? (double2)((image2 - camera[CAM_IMAGE_ORIGIN]) / pixel_size,

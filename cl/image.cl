@@ -35,9 +35,9 @@
  *   per tracer, offsets ROW_* and ROWD_* below.
  * canvas (canvas_height x canvas_width ints, or unused when canvas_width is 0): the
  *   counts of every window added in (clipped to full scale by the host).
- * Scratch per slot: image (max_window^2 doubles), labels and border (max_window^2 ints
+ * Scratch per slot: image (max_window^2 + 8 doubles), labels and border (max_window^2 ints
  *   each), component light (2 max_window^2 ints), sources (rays double2 and rays doubles),
- *   factors (2 table_width doubles).
+ *   factors (2 table_width doubles; table_width >= the footprint + 9, a multiple of 8).
  */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
@@ -220,35 +220,45 @@ RIMCL_INLINE int perimeter_bin(int score)
 }
 
 /* The factors of one source along one axis of `size` pixels: its footprint [*lo, *hi)
- * (within the window) and the light of each pixel in it, times `weight`. */
+ * (within the window), the light of each pixel in it times `weight`, then zeros up to the
+ * next multiple of 8 (the splat adds whole double8 vectors). */
 RIMCL_INLINE void source_factors(const double position, const int size, const int radius,
                                  const double weight, __constant const double *consts,
-                                 __global double *restrict factors, int *lo, int *hi)
+                                 __global double *factors, int *lo, int *hi)
 {
     const int cell = (int)position;
     const int first = max(0, cell - radius);
     const int last = min(size, cell + radius + 1);
+    const int count = last - first;
+    const double8 lanes = (double8)(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
 #if RIMCL_RENDERER == 0
     /* ndtr at the pixel edges, then differences (rimcl/render.py _render_exact) */
-    const double sigma = consts[IMG_SIGMA];
-    for (int i = first; i <= last; ++i)
-        factors[i - first] = ndtr(((double)i - position) / sigma);
-    for (int i = first; i < last; ++i)
-        factors[i - first] = (factors[i - first + 1] - factors[i - first]) * weight;
+    const double inv_sigma = 1.0 / consts[IMG_SIGMA];
+    for (int i = 0; i <= count; i += 8) {
+        const double8 edges = ((double)(first + i) + lanes) - position;
+        STORE8(ndtr8(edges * inv_sigma), factors + i);
+    }
+    for (int i = 0; i < count; i += 8) {
+        const double8 light = (LOAD8(factors + i + 1) - LOAD8(factors + i)) * weight;
+        STORE8(((double)i + lanes < (double)count) ? light : (double8)(0.0), factors + i);
+    }
 #else
     /* the binned light spread by the filter's kernel (rimcl/render.py _render_paper) */
-    for (int i = first; i < last; ++i)
-        factors[i - first] = consts[IMG_KERNEL + radius + i - cell] * weight;
+    for (int i = 0; i < count; ++i)
+        factors[i] = consts[IMG_KERNEL + radius + first + i - cell] * weight;
+    for (int i = count; i < (count + 7) / 8 * 8; ++i)
+        factors[i] = 0.0;
 #endif
     *lo = first;
     *hi = last;
 }
 
-/* Add one source's separable footprint to the window image. */
+/* Add one source's separable footprint to the window image (whole double8 vectors: the
+ * zeros past the footprint add nothing; the image has 8 spare doubles at its end). */
 RIMCL_INLINE void splat(const double2 position, const double weight, const int width,
                         const int height, const int radius, const int table_width,
-                        __constant const double *consts, __global double *restrict image,
-                        __global double *restrict factors)
+                        __constant const double *consts, __global double *image,
+                        __global double *factors)
 {
     int x0, x1, y0, y1;
     __global double *across = factors;
@@ -257,9 +267,9 @@ RIMCL_INLINE void splat(const double2 position, const double weight, const int w
     source_factors(position.y, height, radius, weight, consts, down, &y0, &y1);
     for (int j = y0; j < y1; ++j) {
         const double g = down[j - y0];
-        __global double *restrict line = image + j * width + x0;
-        for (int i = 0; i < x1 - x0; ++i)
-            line[i] += g * across[i];
+        __global double *line = image + j * width + x0;
+        for (int i = 0; i < x1 - x0; i += 8)
+            STORE8(LOAD8(line + i) + g * LOAD8(across + i), line + i);
     }
 }
 
@@ -579,7 +589,7 @@ __kernel void image_tracers(__constant const double *consts, const int n_tracers
     const size_t slot = get_global_id(0);
     const size_t window_area = (size_t)max_window * max_window;
     slot_scratch s;
-    s.image = image_pool + slot * window_area;
+    s.image = image_pool + slot * (window_area + 8);
     s.labels = int_pool + slot * 4 * window_area;
     s.border = s.labels + window_area;
     s.light_low = s.border + window_area;

@@ -1,32 +1,47 @@
 /*
- * rimcl_ndtr.h -- the standard normal distribution function in double precision.
+ * rimcl_ndtr.h -- the standard normal distribution function, 8 values at a time, in double.
  *
- * Purpose: ndtr(a) = P(X <= a) for a standard normal X, to a few units in the last place
+ * Purpose: ndtr8(a) = P(X <= a) for a standard normal X, to a few units in the last place
  * of 1, as scipy.special.ndtr computes it (the exact renderer integrates each ray's
  * Gaussian over pixels as differences of ndtr, as rimcl/render.py does with scipy). Pure
- * arithmetic, no library calls, so that CPU compilers vectorise loops over pixel edges:
+ * arithmetic on double8 vectors, no library calls, so that it runs in vector registers on
+ * CPUs (GPUs split the vectors):
  *   |x| < 1/sqrt(2) (x = a / sqrt(2)): ndtr = 1/2 + erf(x)/2, erf from its Taylor series;
  *   otherwise: erfc(|x|) = exp(-x^2) erfcx(|x|), with (1 + 2z) erfcx(z) a degree-20
  *   polynomial in t = (z - 4)/(z + 4), fitted for z in [0.7, 27.5] (relative error
  *   4.4e-16 in double arithmetic); beyond 27.5 erfc underflows and is taken as 0.
- * Required: cl_khr_fp64 (enabled by the including kernel file). No defines. Units: none.
+ * Also the unaligned double8 loads and stores of the image kernel (LOAD8, STORE8).
+ * Required: cl_khr_fp64 (enabled by the including kernel file). Optional define:
+ *   RIMCL_POCL_FAST (rimcl_inline.h). Units: none.
  */
 #ifndef RIMCL_NDTR_H
 #define RIMCL_NDTR_H
 
 #include "rimcl_inline.h"
 
+#if RIMCL_POCL_FAST
+/* clang's unaligned vector type: one vector load or store, no library call */
+typedef double rimcl_double8_u __attribute__((ext_vector_type(8), aligned(8)));
+#define LOAD8(p) (*(__global const rimcl_double8_u *)(p))
+#define STORE8(v, p) (*(__global rimcl_double8_u *)(p) = (v))
+#else
+#define LOAD8(p) vload8(0, (p))
+#define STORE8(v, p) vstore8((v), 0, (p))
+#endif
+
+/* 2^52 + 2^51: adding and subtracting it rounds a double to an integer (ties to even) */
+#define NDTR_ROUNDER 6755399441055744.0
+
 /* exp(y) for y <= 0 to about 1 ulp; 0 where the result would be subnormal. */
-RIMCL_INLINE double ndtr_exp(double y)
+RIMCL_INLINE double8 ndtr_exp(double8 y)
 {
     const double log2e = 1.4426950408889634;
     const double ln2_hi = 0.6931467056274414; /* 21 significant bits: n ln2_hi is exact */
     const double ln2_lo = 4.7493250390316726e-07;
-    double n = dbl_rint(y * log2e);
-    n = (n < -1022.0) ? -1023.0 : n;
-    double r = (y - n * ln2_hi) - n * ln2_lo;
+    const double8 n = (y * log2e + NDTR_ROUNDER) - NDTR_ROUNDER;
+    const double8 r = (y - n * ln2_hi) - n * ln2_lo;
     /* Taylor series of exp(r), |r| <= ln2 / 2: the 14th term is 4e-18 */
-    double p = 1.6059043836821613e-10;
+    double8 p = 1.6059043836821613e-10;
     p = p * r + 2.08767569878681e-09;
     p = p * r + 2.505210838544172e-08;
     p = p * r + 2.755731922398589e-07;
@@ -40,15 +55,17 @@ RIMCL_INLINE double ndtr_exp(double y)
     p = p * r + 0.5;
     p = p * r + 1.0;
     p = p * r + 1.0;
-    double scale = as_double((long)((int)n + 1023) << 52);
-    return (n < -1022.0) ? 0.0 : p * scale;
+    /* 2^n from the bits of n + NDTR_ROUNDER (its low bits hold n) */
+    const long8 k = as_long8(n + NDTR_ROUNDER) - as_long(NDTR_ROUNDER);
+    const double8 scale = as_double8((k + 1023) << 52);
+    return (n < -1022.0) ? (double8)(0.0) : p * scale;
 }
 
 /* erf(x) for |x| < 0.71: x times a polynomial in x^2 (Taylor series to x^31). */
-RIMCL_INLINE double ndtr_erf_small(double x)
+RIMCL_INLINE double8 ndtr_erf_small(double8 x)
 {
-    const double s = x * x;
-    double p = -2.7835162072109215e-14;
+    const double8 s = x * x;
+    double8 p = -2.7835162072109215e-14;
     p = p * s + 4.4632242632864775e-13;
     p = p * s - 6.7113668551641105e-12;
     p = p * s + 9.422759064650411e-11;
@@ -68,10 +85,10 @@ RIMCL_INLINE double ndtr_erf_small(double x)
 }
 
 /* erfc(z) for z >= 0.7. */
-RIMCL_INLINE double ndtr_erfc_large(double z)
+RIMCL_INLINE double8 ndtr_erfc_large(double8 z)
 {
-    const double t = (z - 4.0) / (z + 4.0);
-    double p = -1.7234428715785117e-08;
+    const double8 t = (z - 4.0) / (z + 4.0);
+    double8 p = -1.7234428715785117e-08;
     p = p * t + 7.785873874860938e-08;
     p = p * t + 7.94178940695347e-08;
     p = p * t - 7.908013313281755e-07;
@@ -92,19 +109,20 @@ RIMCL_INLINE double ndtr_erfc_large(double z)
     p = p * t + 0.01537965210262221;
     p = p * t - 0.13962111684056228;
     p = p * t + 1.2329951186255526;
-    const double erfcx = p / (1.0 + 2.0 * z);
-    return (z > 27.5) ? 0.0 : ndtr_exp(-(z * z)) * erfcx;
+    const double8 erfcx = p / (1.0 + 2.0 * z);
+    return (z > 27.5) ? (double8)(0.0) : ndtr_exp(-(z * z)) * erfcx;
 }
 
-/* P(X <= a) for a standard normal X. */
-RIMCL_INLINE double ndtr(double a)
+/* P(X <= a) for a standard normal X, lane by lane. */
+RIMCL_INLINE double8 ndtr8(double8 a)
 {
     const double sqrth = 0.7071067811865476;
-    const double x = a * sqrth;
-    const double z = dbl_fabs(x);
-    const double tail = 0.5 * ndtr_erfc_large((z < 0.7) ? 0.7 : z);
-    const double middle = 0.5 + 0.5 * ndtr_erf_small((z < sqrth) ? x : 0.0);
-    return (z < sqrth) ? middle : ((x > 0.0) ? 1.0 - tail : tail);
+    const double8 x = a * sqrth;
+    const double8 z = (x < 0.0) ? -x : x;
+    const long8 middle_lane = z < sqrth;
+    const double8 tail = 0.5 * ndtr_erfc_large(middle_lane ? (double8)(0.7) : z);
+    const double8 middle = 0.5 + 0.5 * ndtr_erf_small(middle_lane ? x : (double8)(0.0));
+    return middle_lane ? middle : ((x > 0.0) ? 1.0 - tail : tail);
 }
 
 #endif

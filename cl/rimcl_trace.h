@@ -442,27 +442,3 @@ RIMCL_INLINE void store_lane_record(__global float *out, __global int4 *info,
 }
 
 #endif
-    for (int q = 0; q < 3; ++q) {
-        out[q] = (float)r_hi[q];
-        out[6 + q] = (float)t_hi[q];
-#if RIMCL_PRECISION == RIMCL_F32C
-        out[3 + q] = r_lo[q];
-        out[9 + q] = t_lo[q];
-#elif RIMCL_PRECISION == RIMCL_F64
-        out[3 + q] = (float)(r_hi[q] - (double)(float)r_hi[q]);
-        out[9 + q] = (float)(t_hi[q] - (double)(float)t_hi[q]);
-#else
-        out[3 + q] = 0.0f;
-        out[9 + q] = 0.0f;
-#endif
-    }
-    out[12] = (float)(LANE(res->sums.s, k) - LANE(res->sums.s_c, k));
-    out[13] = (float)(LANE(res->sums.opl, k) - LANE(res->sums.opl_c, k));
-    out[14] = (float)LANE(res->sums.nperp.x, k);
-    out[15] = (float)LANE(res->sums.nperp.y, k);
-    out[16] = (float)LANE(res->sums.nperp.z, k);
-    *info = (int4)((int)LANE_I(res->steps, k), (int)LANE_I(res->status, k),
-                   (int)LANE_I(res->rejected, k), (int)LANE_I(res->evaluations, k));
-}
-
-#endif

@@ -59,6 +59,9 @@ CPU_SLOTS_PER_CORE = 4
 GPU_SLOTS_PER_UNIT = 256
 #: Work-group size of the image kernel on GPUs.
 GPU_GROUP = 64
+#: Work-group size of the fan kernel: fixed, so that PoCL compiles its work-group function
+#: once (it specialises kernels per local size) and the last, smaller batch reuses it.
+FAN_GROUP = 64
 #: Largest share of the device memory the image scratch may take.
 SCRATCH_SHARE = 0.25
 
@@ -139,7 +142,8 @@ class DeviceImager:
             self.radius = int(TRUNCATE_SIGMAS * sigma + 0.5)
             kernel = _paper_kernel(sigma, self.radius)
         window = int(renderer.max_window)
-        self.table_width = min(2 * self.radius + 2, window + 1)
+        # a footprint's edges, rounded up to whole double8 vectors, plus one spare vector
+        self.table_width = (min(2 * self.radius + 2, window + 1) + 15) // 8 * 8
         cpu = bool(device.type & cl.device_type.CPU)
         # CPUs: a work-group per slot, so that slots spread over the cores; GPUs: many slots
         self.group = 1 if cpu else GPU_GROUP
@@ -163,7 +167,7 @@ class DeviceImager:
         if not cpu:
             self.slots = max(self.group, self.slots // self.group * self.group)
         self.scratch = [
-            cl.Buffer(context, rw, size=self.slots * area * 8),
+            cl.Buffer(context, rw, size=self.slots * (area + 8) * 8),
             cl.Buffer(context, rw, size=self.slots * area * 16),
             cl.Buffer(context, rw, size=self.slots * self.rays * 16),
             cl.Buffer(context, rw, size=self.slots * self.rays * 8),
@@ -543,7 +547,8 @@ class DeviceEngine:
             *sample_args,
         )
         items = -(-n_rays // launch.shape.lanes)
-        fan_event = cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), None)
+        items = -(-items // FAN_GROUP) * FAN_GROUP
+        fan_event = cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), (FAN_GROUP,))
         events = []
         if sample_rays is not None and len(sample_rays):
             host["sample_out"] = np.empty((len(sample_rays), _RAY_OUT_STRIDE), dtype=np.float32)
