@@ -37,7 +37,8 @@ from rimcl.measure import run_render
 from rimcl.provenance import to_json, versions
 from rimcl.scene import load_scene
 
-STAGES = ("track", "trace", "render", "centroid")
+ENGINES = ("numpy", "device")
+TIMINGS = ("track", "trace", "render", "centroid", "engine_host")
 
 
 def configs(scene, cases, engine, device, tracers=None, fan=None):
@@ -56,30 +57,42 @@ def configs(scene, cases, engine, device, tracers=None, fan=None):
     return out
 
 
-def run_scene(per_case):
-    """Every case with one reference, as a study does; stage times summed."""
-    totals = dict.fromkeys((*STAGES, "engine_host"), 0.0)
-    reference = None
-    rays = images = 0
-    start = time.perf_counter()
-    for case, config in per_case.items():
-        result = run_render(None, case=case, config=config, reference=reference)
-        frames, count = result.attrs["n_frames"], result.attrs["n_tracers"]
-        passes = 1 if reference is not None else 2  # the first case also makes the reference
-        reference = result.reference
-        rays += passes * frames * count * result.attrs["rays_per_tracer"]
-        images += passes * frames * count
-        for name in totals:
-            totals[name] += result.timings.get(name, 0.0)
-    wall = time.perf_counter() - start
-    return {"wall_s": wall, "rays": rays, "images": images, "rays_per_s": rays / wall, **totals}
+def run_scene(per_engine):
+    """Every case through every engine, interleaved case by case (so both engines see the
+    same machine load), each engine making its reference once, as a study does."""
+    rows = {
+        engine: {"wall_s": 0.0, "rays": 0, "images": 0, **dict.fromkeys(TIMINGS, 0.0)}
+        for engine in per_engine
+    }
+    references = dict.fromkeys(per_engine)
+    cases = next(iter(per_engine.values()))
+    for case in cases:
+        for engine, per_case in per_engine.items():
+            start = time.perf_counter()
+            result = run_render(
+                None, case=case, config=per_case[case], reference=references[engine]
+            )
+            row = rows[engine]
+            row["wall_s"] += time.perf_counter() - start
+            passes = 1 if references[engine] is not None else 2  # the first makes the reference
+            references[engine] = result.reference
+            frames, count = result.attrs["n_frames"], result.attrs["n_tracers"]
+            row["rays"] += passes * frames * count * result.attrs["rays_per_tracer"]
+            row["images"] += passes * frames * count
+            for name in TIMINGS:
+                row[name] += result.timings.get(name, 0.0)
+    for row in rows.values():
+        row["rays_per_s"] = row["rays"] / row["wall_s"]
+    return rows
 
 
-def warm_up(scene, device):
-    """Build every kernel both engines use (builds are cached and not part of the runs)."""
+def warm_up(scene, device, sizes):
+    """Build every kernel both engines use, for every batch size of the runs (PoCL compiles
+    a kernel once per work size; builds are cached and are not part of the runs)."""
     for engine in ("device", "numpy"):
-        small = configs(scene, ["C1"], engine, device, tracers=4)
-        run_scene(small)
+        for config in configs(scene, ["C1"], engine, device, **sizes).values():
+            one_frame = dataclasses.replace(config, time=dataclasses.replace(config.time, frames=1))
+            run_render(None, case="C1", config=one_frame)
 
 
 def profile_device(per_case):
@@ -107,17 +120,18 @@ def main():
     device = select_device(args.device)
     scene = load_scene(None)
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
-    warm_up(scene, device)
     scenes = {
         "default study": {"tracers": args.tracers, "fan": None},
         "paper density": {"tracers": args.paper_tracers, "fan": 100},
     }
+    for sizes in scenes.values():
+        warm_up(scene, device, sizes)
     report = {"device": describe_device(device), "cases": cases, "scenes": {}}
     print(f"device: {report['device']['device']} ({report['device']['platform']})")
     for name, sizes in scenes.items():
-        rows = {}
-        for engine in ("numpy", "device"):
-            rows[engine] = run_scene(configs(scene, cases, engine, device, **sizes))
+        rows = run_scene(
+            {engine: configs(scene, cases, engine, device, **sizes) for engine in ENGINES}
+        )
         ratio = rows["numpy"]["wall_s"] / rows["device"]["wall_s"]
         report["scenes"][name] = {**rows, "ratio_numpy_over_device": ratio}
         first = configs(scene, cases[:1], "device", device, **sizes)[cases[0]]

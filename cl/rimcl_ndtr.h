@@ -120,8 +120,12 @@ RIMCL_INLINE double8 ndtr8(double8 a)
     const double8 x = a * sqrth;
     const double8 z = (x < 0.0) ? -x : x;
     const long8 middle_lane = z < sqrth;
-    const double8 tail = 0.5 * ndtr_erfc_large(middle_lane ? (double8)(0.7) : z);
-    const double8 middle = 0.5 + 0.5 * ndtr_erf_small(middle_lane ? x : (double8)(0.0));
+    /* each branch only where some lane needs it (most pixel edges lie in the tails) */
+    double8 tail = (double8)(0.0), middle = (double8)(0.0);
+    if (!all(middle_lane))
+        tail = 0.5 * ndtr_erfc_large(middle_lane ? (double8)(0.7) : z);
+    if (any(middle_lane))
+        middle = 0.5 + 0.5 * ndtr_erf_small(middle_lane ? x : (double8)(0.0));
     return middle_lane ? middle : ((x > 0.0) ? 1.0 - tail : tail);
 }
 

@@ -64,6 +64,9 @@ GPU_GROUP = 64
 FAN_GROUP = 64
 #: Largest share of the device memory the image scratch may take.
 SCRATCH_SHARE = 0.25
+#: Rays per batch up to which batches are enlarged to fill the image slots (about 700 MB of
+#: device memory for the rays' image points, steps and codes).
+MAX_BATCH_RAYS = 1 << 25
 
 
 def _perimeter_weights():
@@ -116,7 +119,8 @@ class DeviceImager:
     rays_per_tracer : int
         ``K``, rays of each tracer.
     max_tracers : int
-        Largest batch.
+        Largest batch (raised to the number of scratch slots, at most :data:`MAX_BATCH_RAYS`
+        rays: a GPU needs thousands of tracer images in flight).
     device : pyopencl.Device
     queue : pyopencl.CommandQueue
         An in-order queue with profiling.
@@ -131,7 +135,6 @@ class DeviceImager:
         require_fp64(device)
         self.imaging = imaging
         self.rays = int(rays_per_tracer)
-        self.max_tracers = int(max_tracers)
         self.queue = queue
         renderer = imaging.renderer
         sigma = float(renderer.psf_sigma)
@@ -166,6 +169,8 @@ class DeviceImager:
         self.slots = max(1, min(int(wanted), int(budget // slot_bytes)))
         if not cpu:
             self.slots = max(self.group, self.slots // self.group * self.group)
+        fill = min(self.slots, max(1, MAX_BATCH_RAYS // self.rays))
+        self.max_tracers = max(int(max_tracers), fill)
         self.scratch = [
             cl.Buffer(context, rw, size=self.slots * (area + 8) * 8),
             cl.Buffer(context, rw, size=self.slots * area * 16),
@@ -207,12 +212,16 @@ class DeviceImager:
                     cl.mem_flags.READ_ONLY,
                     size=self.max_tracers * self.rays * 8,
                 )
-            cl.enqueue_copy(self.queue, self.ray_weights, np.ascontiguousarray(weights))
+            cl.enqueue_copy(
+                self.queue, self.ray_weights, np.ascontiguousarray(weights), is_blocking=False
+            )
             return self.ray_weights, 1
         shared = np.broadcast_to(weights, (self.rays,))
         key = shared.tobytes()
         if key != self._weights_key:
-            cl.enqueue_copy(self.queue, self.shared_weights, np.ascontiguousarray(shared))
+            cl.enqueue_copy(
+                self.queue, self.shared_weights, np.ascontiguousarray(shared), is_blocking=False
+            )
             self._weights_key = key
         return self.shared_weights, 0
 
@@ -258,7 +267,9 @@ class DeviceImager:
         import pyopencl as cl
 
         if scales is not None:
-            cl.enqueue_copy(self.queue, self.scales, np.ascontiguousarray(scales, dtype=np.float64))
+            # non-blocking: the queue keeps the host array until the copy is done
+            host = np.ascontiguousarray(scales, dtype=np.float64)
+            cl.enqueue_copy(self.queue, self.scales, host, is_blocking=False)
         cl.enqueue_fill_buffer(self.queue, self.counter, np.int32(0), 0, 4)
         weight_buffer, per_ray = weights
         canvas_buffer = self.canvas if canvas else self.counter
@@ -380,7 +391,7 @@ class DeviceEngine:
     imaging : rimcl.imaging.Imaging
     device : pyopencl.Device
     batch : int
-        Tracers per batch.
+        Tracers per batch (raised on GPUs to fill the image slots: :class:`DeviceImager`).
     """
 
     def __init__(self, camera, scene, imaging, device, batch):
@@ -390,9 +401,10 @@ class DeviceEngine:
 
         require_fp64(device)
         self.camera, self.scene, self.imaging, self.device = camera, scene, imaging, device
-        self.batch = int(batch)
         self.rays = camera.rays_per_tracer
         self.queue = _profiling_queue(device)
+        self.imager = DeviceImager(imaging, self.rays, batch, device, self.queue)
+        self.batch = self.imager.max_tracers
         context = context_for(device)
         ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
         self.aims = cl.Buffer(context, ro, hostbuf=np.ascontiguousarray(camera.aim_points()))
@@ -407,7 +419,8 @@ class DeviceEngine:
         )
         self.sample_size = 0
         self.sample_buffers = None
-        self.imager = DeviceImager(imaging, self.rays, self.batch, device, self.queue)
+        # two sets: the host fills one while the device works from the other
+        self.host_sets = [self._host_arrays(), self._host_arrays()]
 
     def _camera_block(self):
         block = np.zeros(_CAM_COUNT, dtype=np.float64)
@@ -477,7 +490,7 @@ class DeviceEngine:
             self.imager.use_canvas(canvas.counts.shape)
         per_tracer_weights = np.ndim(weights) == 2
         shared = None if per_tracer_weights else self.imager.set_weights(weights, 0)
-        host_sets = [self._host_arrays(), self._host_arrays()]
+        host_sets = self.host_sets
         pending = None
         for number, first in enumerate(range(0, len(positions), self.batch)):
             ids = np.arange(first, min(first + self.batch, len(positions)))
