@@ -350,18 +350,18 @@ class DeviceImager:
             total = total - threshold * area
             moment_col = moment_col - threshold * rows_l[:, _ROW_COLS]
             moment_row = moment_row - threshold * rows_l[:, _ROW_ROWS]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            col = moment_col / 2 / total
+            row = moment_row / 2 / total
+        pixels = np.stack([rows_l[:, _ROW_WINDOW] + col, rows_l[:, _ROW_WINDOW + 1] + row], axis=-1)
+        positions = renderer.to_sheet(pixels[found])
+        out["x2"][found], out["x3"][found] = positions[:, 0], positions[:, 1]
         histogram = np.zeros((count, 50), dtype=np.int64)
         histogram[:, list(PERIMETER_SCORES)] = rows_l[:, _ROW_PERIMETER : _ROW_PERIMETER + 10]
         for k in np.flatnonzero(found):
             # as skimage: the histogram of scores times the weights, one dot product
-            boundary = float(histogram[k] @ self.perimeter_weights)
-            col = moment_col[k] / 2 / total[k]
-            row = moment_row[k] / 2 / total[k]
-            col0, row0 = rows_l[k, _ROW_WINDOW], rows_l[k, _ROW_WINDOW + 1]
-            position = renderer.to_sheet([col0 + col, row0 + row])
-            out["x2"][k], out["x3"][k] = position
-            out["perimeter"][k] = boundary
-            out["circularity"][k] = boundary**2 / (4 * np.pi * int(area[k]))
+            out["perimeter"][k] = histogram[k] @ self.perimeter_weights
+        out["circularity"][found] = out["perimeter"][found] ** 2 / (4 * np.pi * area[found])
         return out
 
 
