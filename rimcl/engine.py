@@ -31,11 +31,19 @@ import time
 
 import numpy as np
 
+from rimcl.camera import PupilCamera
 from rimcl.centroid import NO_POSITION, TracerFlag
 from rimcl.errors import RimclError
 from rimcl.imaging import empty_columns
 from rimcl.render import TRUNCATE_SIGMAS
-from rimcl.trace import STATUS_NAMES, _finish, _validate_rays, plan_steps, prepare_launch
+from rimcl.trace import (
+    STATUS_NAMES,
+    _finish,
+    _validate_rays,
+    default_kernel_shape,
+    plan_steps,
+    prepare_launch,
+)
 
 #: The exact renderer's Gaussian is cut this many σ from the ray: the light left out is
 #: below 7e-16 of the ray's (the NumPy engine integrates over the whole window).
@@ -62,6 +70,10 @@ GPU_GROUP = 64
 #: Work-group size of the fan kernel: fixed, so that PoCL compiles its work-group function
 #: once (it specialises kernels per local size) and the last, smaller batch reuses it.
 FAN_GROUP = 64
+#: Rays per work-item of the fan kernel on CPUs: 16 rather than trace_rays' 8 (more rays in
+#: flight hide more of the field's memory latency: +13 % ray-steps per CPU-second on the
+#: shipped 64³ periodic sample, the same on a 128³ clamped field; results are identical).
+FAN_CPU_LANES = 16
 #: Largest share of the device memory the image scratch may take.
 SCRATCH_SHARE = 0.25
 #: Rays per batch up to which batches are enlarged to fill the image slots (about 700 MB of
@@ -427,7 +439,7 @@ class DeviceEngine:
         block[0] = self.scene.x_sheet
         block[1:3] = self.imaging.renderer.origin
         block[3] = self.imaging.renderer.pixel_size
-        if hasattr(self.camera, "diameter"):
+        if isinstance(self.camera, PupilCamera):
             block[4:7] = self.camera.axis
             block[7:10] = self.camera.centre
             block[10] = 0.5 * self.camera.diameter
@@ -454,10 +466,20 @@ class DeviceEngine:
             device=device,
             origins=origins,
             directions=directions,
+            kernel_shape=self._fan_shape(),
         )
-        defines = {**launch.defines, "RIMCL_CAMERA": int(hasattr(self.camera, "diameter"))}
+        defines = {**launch.defines, "RIMCL_CAMERA": int(isinstance(self.camera, PupilCamera))}
         kernel = get_kernel(build_program(context_for(device), "fan.cl", defines), "trace_fan")
         return kernel, launch, plan
+
+    def _fan_shape(self):
+        """Rays per work-item of the fan kernel: :data:`FAN_CPU_LANES` on CPUs."""
+        import pyopencl as cl
+
+        shape = default_kernel_shape(self.device)
+        if self.device.type & cl.device_type.CPU:
+            shape = dataclasses.replace(shape, lanes=FAN_CPU_LANES)
+        return shape
 
     def _sample_buffers(self, count):
         import pyopencl as cl

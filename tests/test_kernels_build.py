@@ -66,7 +66,7 @@ DEFINE_SETS = {
                 RIMCL_INTERP=(0, 1, 2),
                 RIMCL_PERIODIC=(0, 1),
                 RIMCL_CAMERA=(0, 1),
-                RIMCL_LANES=(8,),
+                RIMCL_LANES=(16,),
                 RIMCL_POCL_FAST=(1,),
             ),
             *_product(
