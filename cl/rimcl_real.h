@@ -34,9 +34,7 @@
 #ifndef RIMCL_LANES
 #define RIMCL_LANES 1
 #endif
-#ifndef RIMCL_POCL_FAST
-#define RIMCL_POCL_FAST 0
-#endif
+#include "rimcl_inline.h"
 
 /* The compensated sums below rely on every operation being rounded as written. */
 #pragma OPENCL FP_CONTRACT OFF
@@ -60,16 +58,12 @@ typedef float4 real4;
 
 /* ---- PoCL switch: the hot loop without library calls ---- */
 #if RIMCL_POCL_FAST
-#define RIMCL_INLINE inline __attribute__((always_inline))
 #if RIMCL_PRECISION == RIMCL_F64
 #define real_floor(x) __builtin_floor(x)
 #else
 #define real_floor(x) __builtin_floorf(x)
 #endif
 #else
-/* static: NVIDIA's compiler treats a plain C99 `inline` as needing an external
- * definition and fails with "ptxas fatal: Unresolved extern function". */
-#define RIMCL_INLINE static inline
 #define real_floor(x) floor(x)
 #endif
 

@@ -46,8 +46,9 @@ def _case_list(_ctx, _param, value):
 )
 @click.option(
     "--engine",
-    type=click.Choice(["numpy"]),
-    help="Where tracer images are rendered and located [run.engine].",
+    type=click.Choice(["numpy", "device"]),
+    help="Where tracer images are rendered and located: numpy (the reference) or device "
+    "(OpenCL, with the trace) [run.engine].",
 )
 @click.option(
     "--mode",

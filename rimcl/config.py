@@ -20,7 +20,7 @@ from rimcl.sensor import Sensor
 
 DEFAULT_RAYS_PER_BATCH = 1 << 17  # rays traced per batch: ~40 MB of host memory
 DEFAULT_RAY_SAMPLE = 20_000
-ENGINES = ("numpy",)
+ENGINES = ("device", "numpy")
 MAX_FRAMES = 1000
 DEFAULT_PSF_SIGMA = 7.0  # the study's PSF (px) when neither the scene nor a lens sets one
 
@@ -365,8 +365,10 @@ class RunConfig:
     Attributes
     ----------
     device : str or pyopencl.Device, optional
-    engine : {"numpy"}
-        Where images are rendered and located.
+    engine : {"device", "numpy"}
+        Where images are rendered and located: on the OpenCL device with the trace
+        (:mod:`rimcl.engine`), or tracer by tracer in NumPy (:mod:`rimcl.imaging`, the
+        reference).
     rays_per_batch : int
         Rays traced per batch; bounds the memory.
     ray_sample : int

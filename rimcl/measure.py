@@ -283,6 +283,8 @@ class Setup:
         The case-independent configuration (a reusable reference must match it).
     timings : dict of str to float
         Seconds per stage, filled as the stages run.
+    engine : rimcl.engine.DeviceEngine or None
+        The device pipeline (``engine = "device"``); None for the NumPy engine.
     """
 
     source: object
@@ -300,6 +302,7 @@ class Setup:
     batch: int
     key: dict
     timings: dict
+    engine: object = None
 
 
 def _check_memory(source, source_name, config, camera, imaging, device, frames):
@@ -428,6 +431,15 @@ def _setup(source, source_name, case_index, config, streams, shard):
         key={},
         timings={"track": 0.0, "trace": 0.0, "render": 0.0, "centroid": 0.0},
     )
+    if config.run.engine == "device":
+        from rimcl.engine import DeviceEngine
+
+        reason = DeviceEngine.unsupported(camera, imaging, mie)
+        if reason:
+            raise RimclError(f"the device engine does not yet {reason}; use engine numpy")
+        setup.engine = DeviceEngine(
+            camera, scene, imaging, device, setup.batch, first_tracer=setup.first_tracer
+        )
     calibration = None
     if integrator.interp == "auto":
         calibration = _calibrate_interp(setup, case_index, every_tracer)
@@ -496,6 +508,9 @@ def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None
         ``sampler`` (a :class:`_RaySampler`), ``canvas`` (a :class:`FrameImage`) and
         ``bar`` (a progress bar), each optional.
     """
+    if setup.engine is not None:
+        setup.engine.image_frame(setup, pass_, frame, field, positions, scales, extras)
+        return
     extras = extras or {}
     camera, scene, timings = setup.camera, setup.scene, setup.timings
     rays = camera.rays_per_tracer

@@ -566,7 +566,9 @@ def _keys():
             "engine",
             "numpy",
             "str",
-            "where tracer images are rendered and located: numpy (the reference engine)",
+            "where tracer images are rendered and located: numpy (the reference engine) or "
+            "device (rays, images and centroids on the OpenCL device; not yet with a lens "
+            "camera, sensor noise, per-image scaling or Mie weights)",
             choices=choice["engine"],
         ),
         SceneKey(

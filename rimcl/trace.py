@@ -539,6 +539,98 @@ def _field_buffer(field, context, device=None, interp="trilinear"):
     )
 
 
+@dataclasses.dataclass(frozen=True)
+class TraceLaunch:
+    """What every trace kernel takes besides its rays, resolved for one field and settings.
+
+    Attributes
+    ----------
+    defines : dict
+        ``-D`` defines of the trace (:func:`kernel_defines`).
+    shape : KernelShape
+    max_steps : int
+    field_buffer : pyopencl.Buffer or pyopencl.Image
+        The field on the device (uploaded once per field and context).
+    counts : ndarray of int32, shape (4,)
+        Grid nodes ``(n1, n2, n3, 0)``.
+    params : pyopencl.Buffer
+        The float parameter block (``cl/rimcl_params.h``).
+    """
+
+    defines: dict
+    shape: KernelShape
+    max_steps: int
+    field_buffer: object
+    counts: np.ndarray
+    params: object
+
+
+def prepare_launch(
+    field,
+    *,
+    x_end,
+    plan,
+    interp,
+    precision,
+    device,
+    origins,
+    directions,
+    max_steps=None,
+    kernel_shape=None,
+):
+    """Resolve the kernel arguments shared by all rays of a trace (no rays are uploaded).
+
+    Parameters
+    ----------
+    field : Field or AnalyticField
+    x_end : float
+    plan : StepPlan
+    interp : {"trilinear", "texture", "bspline3"}
+    precision : {"f32", "f32c", "f64"}
+    device : pyopencl.Device
+    origins, directions : ndarray, float64, shape (N, 3)
+        Rays representative of the trace (they set the default ``max_steps`` of
+        closed-form fields; gridded fields only need their start plane).
+    max_steps : int, optional
+    kernel_shape : KernelShape, optional
+        Default :func:`default_kernel_shape`.
+
+    Returns
+    -------
+    TraceLaunch
+    """
+    import pyopencl as cl
+
+    from rimcl.device import context_for, has_fp64
+
+    if precision == "f64" and not has_fp64(device):
+        raise RimclError(f"precision f64 needs cl_khr_fp64, which {device.name.strip()} lacks")
+    shape = default_kernel_shape(device) if kernel_shape is None else kernel_shape
+    defines = kernel_defines(field, precision, interp, plan.adaptive, shape)
+    if max_steps is None:
+        smallest = plan.step_min if plan.adaptive else plan.step
+        max_steps = _default_max_steps(field, smallest, x_end, origins, directions)
+    context = context_for(device)
+    counts = (
+        np.array([*field.counts, 0], dtype=np.int32)
+        if isinstance(field, Field)
+        else np.zeros(4, dtype=np.int32)
+    )
+    params = cl.Buffer(
+        context,
+        cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+        hostbuf=_param_block(field, x_end, plan),
+    )
+    return TraceLaunch(
+        defines=defines,
+        shape=shape,
+        max_steps=int(max_steps),
+        field_buffer=_field_buffer(field, context, device, interp),
+        counts=counts,
+        params=params,
+    )
+
+
 def trace_rays(
     field,
     origins,
@@ -691,30 +783,25 @@ def run_trace(
     """
     import pyopencl as cl
 
-    from rimcl.device import context_for, has_fp64, queue_for
+    from rimcl.device import context_for, queue_for
     from rimcl.program import build_program, get_kernel
 
-    if precision == "f64" and not has_fp64(device):
-        raise RimclError(f"precision f64 needs cl_khr_fp64, which {device.name.strip()} lacks")
-    shape = default_kernel_shape(device) if kernel_shape is None else kernel_shape
-    defines = kernel_defines(field, precision, interp, plan.adaptive, shape)
-    if max_steps is None:
-        smallest = plan.step_min if plan.adaptive else plan.step
-        max_steps = _default_max_steps(field, smallest, x_end, origins, directions)
+    launch = prepare_launch(
+        field,
+        x_end=x_end,
+        plan=plan,
+        interp=interp,
+        precision=precision,
+        device=device,
+        origins=origins,
+        directions=directions,
+        max_steps=max_steps,
+        kernel_shape=kernel_shape,
+    )
+    shape, max_steps = launch.shape, launch.max_steps
     context, queue = context_for(device), queue_for(device)
-    program = build_program(context, "trace.cl", defines)
-    kernel = get_kernel(program, "trace_rays")
-    field_buffer = _field_buffer(field, context, device, interp)
-    counts = (
-        np.array([*field.counts, 0], dtype=np.int32)
-        if isinstance(field, Field)
-        else np.zeros(4, dtype=np.int32)
-    )
-    params = cl.Buffer(
-        context,
-        cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-        hostbuf=_param_block(field, x_end, plan),
-    )
+    kernel = get_kernel(build_program(context, "trace.cl", launch.defines), "trace_rays")
+    field_buffer, counts, params = launch.field_buffer, launch.counts, launch.params
 
     count = origins.shape[0]
     raw_out = np.empty((count, _RAY_OUT_STRIDE), dtype=np.float32)

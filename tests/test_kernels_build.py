@@ -55,6 +55,32 @@ DEFINE_SETS = {
             ),
         ],
     ),
+    # the device engine: camera fans (plane, pupil) in both kernel shapes; image kernels
+    "fan.cl": (
+        ("trace_fan",),
+        [
+            *_product(RIMCL_PRECISION=(0, 1, 2), RIMCL_FIELD=(0,), RIMCL_CAMERA=(0, 1)),
+            *_product(
+                RIMCL_PRECISION=(1,),
+                RIMCL_FIELD=(0,),
+                RIMCL_INTERP=(0, 1, 2),
+                RIMCL_PERIODIC=(0, 1),
+                RIMCL_CAMERA=(0, 1),
+                RIMCL_LANES=(16,),
+                RIMCL_POCL_FAST=(1,),
+            ),
+            *_product(
+                RIMCL_PRECISION=(1,), RIMCL_FIELD=(2,), RIMCL_CAMERA=(1,), RIMCL_ADAPTIVE=(1,)
+            ),
+        ],
+    ),
+    "image.cl": (
+        ("image_tracers",),
+        [
+            *_product(RIMCL_RENDERER=(0, 1), RIMCL_CENTROID=(0, 1)),
+            *_product(RIMCL_RENDERER=(0, 1), RIMCL_CENTROID=(0,), RIMCL_POCL_FAST=(1,)),
+        ],
+    ),
 }
 
 

@@ -1,0 +1,167 @@
+"""End-to-end speed of the measurement through both engines, on any device, in one run.
+
+Two scenes, each through ``engine = "numpy"`` (trace on the device, images tracer by
+tracer in NumPy) and ``engine = "device"`` (:mod:`rimcl.engine`: rays stay on the device
+until per-tracer rows come back), with the reference of each engine made once and reused
+for every case, as ``rimcl study`` does:
+
+- ``default study``: the built-in scene of ``rimcl study`` (shipped 64³ sample, 400
+  tracers, 24 x 24 rays each, 2048 px, σ 7 px, cases C0-C4, 3 frames);
+- ``paper density``: the same scene with the paper's 100 x 100 = 1e4 rays per tracer
+  (fewer tracers: ``--paper-tracers``).
+
+Printed per scene and engine: wall time, stage times (``trace``: the trace kernel, or for
+the device engine the fan kernel that also back-projects; ``render`` and ``centroid``: the
+NumPy engine's stages, or the device engine's image kernel, which does both), host CPU
+time per tracer image of the device engine (the main thread's CPU time in the engine's
+frame loop: preparing batches, reading rows, forming columns), rays per second end to end
+(rays traced / wall time, reference included), and the ratio of the wall times
+numpy / device. Machines drift by 30-40 % from minute to minute (DESIGN §11): only the
+ratios of one run mean anything.
+
+    python benchmarks/pipeline.py                      # default device
+    python benchmarks/pipeline.py --device nvidia --paper-tracers 300 --json gpu.json
+    python benchmarks/pipeline.py --profile            # + cProfile of the device engine's host
+"""
+
+import argparse
+import cProfile
+import dataclasses
+import io
+import pstats
+import time
+
+from rimcl.config import MeasureConfig
+from rimcl.device import describe_device, select_device
+from rimcl.measure import run_render
+from rimcl.provenance import to_json, versions
+from rimcl.scene import load_scene
+
+ENGINES = ("numpy", "device")
+TIMINGS = ("track", "trace", "render", "centroid", "engine_host")
+
+
+def configs(scene, cases, engine, device, tracers=None, fan=None):
+    """The measurement configuration of each case of ``scene`` for ``engine``."""
+    out = {}
+    for case in cases:
+        config = MeasureConfig.from_scene(scene, case)
+        run = dataclasses.replace(config.run, engine=engine, device=device)
+        camera = config.camera if fan is None else dataclasses.replace(config.camera, fan=fan)
+        count = (
+            config.tracers
+            if tracers is None
+            else dataclasses.replace(config.tracers, count=tracers)
+        )
+        out[case] = dataclasses.replace(config, run=run, camera=camera, tracers=count)
+    return out
+
+
+def run_scene(per_engine):
+    """Every case through every engine, interleaved case by case (so both engines see the
+    same machine load), each engine making its reference once, as a study does."""
+    rows = {
+        engine: {"wall_s": 0.0, "rays": 0, "images": 0, **dict.fromkeys(TIMINGS, 0.0)}
+        for engine in per_engine
+    }
+    references = dict.fromkeys(per_engine)
+    cases = next(iter(per_engine.values()))
+    for case in cases:
+        for engine, per_case in per_engine.items():
+            start = time.perf_counter()
+            result = run_render(
+                None, case=case, config=per_case[case], reference=references[engine]
+            )
+            row = rows[engine]
+            row["wall_s"] += time.perf_counter() - start
+            passes = 1 if references[engine] is not None else 2  # the first makes the reference
+            references[engine] = result.reference
+            frames, count = result.attrs["n_frames"], result.attrs["n_tracers"]
+            row["rays"] += passes * frames * count * result.attrs["rays_per_tracer"]
+            row["images"] += passes * frames * count
+            for name in TIMINGS:
+                row[name] += result.timings.get(name, 0.0)
+    for row in rows.values():
+        row["rays_per_s"] = row["rays"] / row["wall_s"]
+    return rows
+
+
+def warm_up(scene, device, sizes):
+    """Build every kernel both engines use, for every batch size of the runs (PoCL compiles
+    a kernel once per work size; builds are cached and are not part of the runs)."""
+    for engine in ("device", "numpy"):
+        for config in configs(scene, ["C1"], engine, device, **sizes).values():
+            one_frame = dataclasses.replace(config, time=dataclasses.replace(config.time, frames=1))
+            run_render(None, case="C1", config=one_frame)
+
+
+def profile_device(per_case):
+    """cProfile of one case through the device engine: where the host time goes."""
+    case, config = next(iter(per_case.items()))
+    profiler = cProfile.Profile()
+    profiler.enable()
+    run_render(None, case=case, config=config)
+    profiler.disable()
+    text = io.StringIO()
+    pstats.Stats(profiler, stream=text).sort_stats("tottime").print_stats(12)
+    return text.getvalue()
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--device", default=None, help="OpenCL device spec (rimcl devices).")
+    parser.add_argument("--cases", default="C0,C1,C2,C3,C4", help="Cases of both scenes.")
+    parser.add_argument("--tracers", type=int, default=None, help="Default study tracers.")
+    parser.add_argument("--paper-tracers", type=int, default=24)
+    parser.add_argument("--profile", action="store_true", help="Profile the device host.")
+    parser.add_argument("--json", default=None, help="Also write the results to this file.")
+    args = parser.parse_args()
+
+    device = select_device(args.device)
+    scene = load_scene(None)
+    cases = [c.strip() for c in args.cases.split(",") if c.strip()]
+    scenes = {
+        "default study": {"tracers": args.tracers, "fan": None},
+        "paper density": {"tracers": args.paper_tracers, "fan": 100},
+    }
+    for sizes in scenes.values():
+        warm_up(scene, device, sizes)
+    report = {"device": describe_device(device), "cases": cases, "scenes": {}}
+    print(f"device: {report['device']['device']} ({report['device']['platform']})")
+    for name, sizes in scenes.items():
+        rows = run_scene(
+            {engine: configs(scene, cases, engine, device, **sizes) for engine in ENGINES}
+        )
+        ratio = rows["numpy"]["wall_s"] / rows["device"]["wall_s"]
+        report["scenes"][name] = {**rows, "ratio_numpy_over_device": ratio}
+        first = configs(scene, cases[:1], "device", device, **sizes)[cases[0]]
+        print(
+            f"\n{name}: {first.tracers.count} tracers x {first.camera.fan**2} rays, "
+            f"cases {','.join(cases)}, reference once"
+        )
+        print(
+            f"{'engine':7s} {'wall s':>8s} {'trace':>7s} {'render':>7s} {'centroid':>8s} "
+            f"{'track':>6s} {'host us/img':>11s} {'rays/s':>9s}"
+        )
+        for engine, row in rows.items():
+            host = row["engine_host"] / row["images"] * 1e6 if engine == "device" else None
+            print(
+                f"{engine:7s} {row['wall_s']:8.2f} {row['trace']:7.2f} {row['render']:7.2f} "
+                f"{row['centroid']:8.2f} {row['track']:6.2f} "
+                f"{'-' if host is None else f'{host:.0f}':>11s} {row['rays_per_s']:9.3g}"
+            )
+        print(f"device engine / numpy engine: {ratio:.2f}x faster")
+    if args.profile:
+        per_case = configs(scene, ["C1"], "device", device, tracers=args.tracers)
+        report["profile"] = profile_device(per_case)
+        print("\ncProfile of the device engine (one case, reference included):")
+        print(report["profile"])
+    report["versions"] = versions()
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as out:
+            out.write(to_json(report))
+    return report
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,729 @@
+"""The device engine: rays stay on the OpenCL device from launch to per-tracer rows (DESIGN §14).
+
+``engine = "device"`` of a measurement. For each batch of tracers, two kernels run on the
+device and only per-tracer rows (and the small ray sample) come back:
+
+1. ``cl/fan.cl`` makes each tracer's camera rays from the float64 tracer and aim positions
+   with the host's operations (so the trace sees the same input bits as
+   :func:`rimcl.trace_rays`), traces them (the kernel of ``cl/trace.cl``), back-projects the
+   exit states to the sheet and applies the camera's collection test in float64 as the host
+   does, and keeps each ray's image point in pixels;
+2. ``cl/image.cl`` forms each tracer's window, renders it (``exact`` or ``paper``), digitises
+   it, finds the 8-connected components above the threshold and the brightest one, and
+   returns its integer moments, area, edge flag and perimeter histogram, the peak, the
+   light and the light-weighted mean image point.
+
+The host turns the rows into the columns of :data:`rimcl.imaging.IMAGE_COLUMNS` with the
+NumPy engine's own arithmetic (centroids are exact integer moments divided once), so where
+the digitised images agree the centroids agree to the last bit. The image points and
+windows are computed with the NumPy engine's float64 operations; the renders differ only
+by the summation order of float64 sums (about 1e-16 of a pixel's light).
+
+Deterministic: no floating-point atomics; components are merged with integer atomics
+whose result does not depend on their order; every sum runs in a fixed order. Memory is
+bounded by the batch size and the scratch slots, whatever the number of tracers. Needs a
+device with ``cl_khr_fp64`` (CPUs, NVIDIA and AMD GPUs).
+"""
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from rimcl.camera import PupilCamera
+from rimcl.centroid import NO_POSITION, TracerFlag
+from rimcl.errors import RimclError
+from rimcl.imaging import empty_columns
+from rimcl.render import TRUNCATE_SIGMAS
+from rimcl.trace import (
+    STATUS_NAMES,
+    _finish,
+    _validate_rays,
+    default_kernel_shape,
+    plan_steps,
+    prepare_launch,
+)
+
+#: The exact renderer's Gaussian is cut this many σ from the ray: the light left out is
+#: below 7e-16 of the ray's (the NumPy engine integrates over the whole window).
+EXACT_SIGMAS = 8.0
+
+# per-tracer rows of cl/image.cl (ROW_* and ROWD_* there)
+_ROW_FLAGS, _ROW_USABLE, _ROW_STATUS, _ROW_VIGNETTED, _ROW_STEPS = 0, 1, 2, 7, 8
+_ROW_WINDOW, _ROW_OUTSIDE, _ROW_AREA, _ROW_SUM, _ROW_SUM_COL, _ROW_SUM_ROW = 9, 13, 14, 15, 16, 17
+_ROW_COLS, _ROW_ROWS, _ROW_PERIMETER, _ROW_LONGS = 18, 19, 20, 30
+_ROWD_PEAK, _ROWD_SCALE, _ROWD_LIGHT, _ROWD_LIGHT_X, _ROWD_LIGHT_Y, _ROWD_COUNT = 0, 1, 2, 3, 4, 5
+#: Scores of border pixels that have a weight in scikit-image's perimeter (neighborhood=4),
+#: in the order of the kernel's perimeter histogram.
+PERIMETER_SCORES = (5, 7, 13, 15, 17, 21, 23, 25, 27, 33)
+
+_RAY_COLLECTED = 8  # ray code bit of cl/fan.cl
+_CAM_COUNT = 11  # camera block of cl/fan.cl
+_RAY_OUT_STRIDE = 17
+#: Tracer images in flight per CPU core (slots taken from a shared counter: balanced).
+CPU_SLOTS_PER_CORE = 4
+#: Tracer images in flight per GPU multiprocessor (one work-item each).
+GPU_SLOTS_PER_UNIT = 256
+#: Work-group size of the image kernel on GPUs.
+GPU_GROUP = 64
+#: Work-group size of the fan kernel: fixed, so that PoCL compiles its work-group function
+#: once (it specialises kernels per local size) and the last, smaller batch reuses it.
+FAN_GROUP = 64
+#: Rays per work-item of the fan kernel on CPUs: 16 rather than trace_rays' 8 (more rays in
+#: flight hide more of the field's memory latency: +13 % ray-steps per CPU-second on the
+#: shipped 64³ periodic sample, the same on a 128³ clamped field; results are identical).
+FAN_CPU_LANES = 16
+#: Largest share of the device memory the image scratch may take.
+SCRATCH_SHARE = 0.25
+#: Rays per batch up to which batches are enlarged to fill the image slots (about 700 MB of
+#: device memory for the rays' image points, steps and codes).
+MAX_BATCH_RAYS = 1 << 25
+
+
+def _perimeter_weights():
+    """scikit-image's weights of the 50 border scores (``skimage.measure.perimeter``)."""
+    weights = np.zeros(50, dtype=np.float64)
+    weights[[5, 7, 15, 17, 25, 27]] = 1
+    weights[[21, 33]] = math.sqrt(2)
+    weights[[13, 23]] = (1 + math.sqrt(2)) / 2
+    return weights
+
+
+def _paper_kernel(sigma, radius):
+    """scipy.ndimage's normalised Gaussian of ``gaussian_filter`` (its order-0 kernel)."""
+    x = np.arange(-radius, radius + 1)
+    phi = np.exp(-0.5 / (sigma * sigma) * x**2)
+    return phi / phi.sum()
+
+
+def require_fp64(device):
+    """Refuse a device without ``cl_khr_fp64`` with one clear line."""
+    from rimcl.device import has_fp64
+
+    if not has_fp64(device):
+        raise RimclError(
+            f"engine 'device' needs cl_khr_fp64, which {device.name.strip()} lacks; "
+            "use engine 'numpy'"
+        )
+
+
+def _profiling_queue(device):
+    import pyopencl as cl
+
+    from rimcl.device import context_for
+
+    return cl.CommandQueue(
+        context_for(device), device, properties=cl.command_queue_properties.PROFILING_ENABLE
+    )
+
+
+def _seconds(event):
+    return (event.profile.end - event.profile.start) * 1e-9
+
+
+class DeviceImager:
+    """The image kernel (``cl/image.cl``) with its scratch, for one camera and batch size.
+
+    Parameters
+    ----------
+    imaging : rimcl.imaging.Imaging
+    rays_per_tracer : int
+        ``K``, rays of each tracer.
+    max_tracers : int
+        Largest batch (raised to the number of scratch slots, at most :data:`MAX_BATCH_RAYS`
+        rays: a GPU needs thousands of tracer images in flight).
+    device : pyopencl.Device
+    queue : pyopencl.CommandQueue
+        An in-order queue with profiling.
+    """
+
+    def __init__(self, imaging, rays_per_tracer, max_tracers, device, queue):
+        import pyopencl as cl
+
+        from rimcl.device import context_for, is_pocl
+        from rimcl.program import build_program, get_kernel
+
+        require_fp64(device)
+        self.imaging = imaging
+        self.rays = int(rays_per_tracer)
+        self.queue = queue
+        renderer = imaging.renderer
+        sigma = float(renderer.psf_sigma)
+        if renderer.kind == "exact":
+            self.radius = math.ceil(EXACT_SIGMAS * sigma)
+            kernel = np.zeros(0)
+        else:
+            self.radius = int(TRUNCATE_SIGMAS * sigma + 0.5)
+            kernel = _paper_kernel(sigma, self.radius)
+        window = int(renderer.max_window)
+        # a footprint's edges, rounded up to whole double8 vectors, plus one spare vector
+        self.table_width = (min(2 * self.radius + 2, window + 1) + 15) // 8 * 8
+        cpu = bool(device.type & cl.device_type.CPU)
+        # CPUs: a work-group per slot, so that slots spread over the cores; GPUs: many slots
+        self.group = 1 if cpu else GPU_GROUP
+        context = context_for(device)
+        defines = {
+            "RIMCL_RENDERER": 0 if renderer.kind == "exact" else 1,
+            "RIMCL_CENTROID": 0 if imaging.centroid_weights == "excess" else 1,
+            "RIMCL_POCL_FAST": int(is_pocl(device)),
+        }
+        self.kernel = get_kernel(build_program(context, "image.cl", defines), "image_tracers")
+        rw, ro = cl.mem_flags.READ_WRITE, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        consts = np.concatenate(
+            [[sigma, float(imaging.threshold), float(renderer.full_scale)], kernel]
+        ).astype(np.float64)
+        self.consts = cl.Buffer(context, ro, hostbuf=consts)
+        area = window * window
+        slot_bytes = area * 24 + self.rays * 24 + 16 * self.table_width
+        budget = SCRATCH_SHARE * device.global_mem_size
+        wanted = (CPU_SLOTS_PER_CORE if cpu else GPU_SLOTS_PER_UNIT) * device.max_compute_units
+        self.slots = max(1, min(int(wanted), int(budget // slot_bytes)))
+        if not cpu:
+            self.slots = max(self.group, self.slots // self.group * self.group)
+        fill = min(self.slots, max(1, MAX_BATCH_RAYS // self.rays))
+        self.max_tracers = max(int(max_tracers), fill)
+        self.scratch = [
+            cl.Buffer(context, rw, size=self.slots * (area + 8) * 8),
+            cl.Buffer(context, rw, size=self.slots * area * 16),
+            cl.Buffer(context, rw, size=self.slots * self.rays * 16),
+            cl.Buffer(context, rw, size=self.slots * self.rays * 8),
+            cl.Buffer(context, rw, size=self.slots * 2 * self.table_width * 8),
+        ]
+        self.counter = cl.Buffer(context, rw, size=4)
+        self.rows_l = cl.Buffer(context, rw, size=self.max_tracers * _ROW_LONGS * 8)
+        self.rows_d = cl.Buffer(context, rw, size=self.max_tracers * _ROWD_COUNT * 8)
+        self.scales = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.max_tracers * 8)
+        self.shared_weights = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.rays * 8)
+        self.ray_weights = None
+        self._weights_key = None
+        self.canvas = None
+        self.canvas_shape = (0, 0)
+        self.threshold_fixed = round(float(imaging.threshold) * 65536)
+        self.perimeter_weights = _perimeter_weights()
+
+    def set_weights(self, weights, n_tracers):
+        """Upload ray weights: a number, ``(K,)`` shared by every tracer, or ``(B, K)``.
+
+        Returns
+        -------
+        (buffer, per_ray) : the weights buffer and whether it holds one weight per ray.
+        """
+        import pyopencl as cl
+
+        weights = np.asarray(weights, dtype=np.float64)
+        if weights.ndim == 2:
+            if weights.shape != (n_tracers, self.rays):
+                raise RimclError(
+                    f"ray weights of shape {weights.shape} do not match {n_tracers} tracers "
+                    f"x {self.rays} rays"
+                )
+            if self.ray_weights is None:
+                self.ray_weights = cl.Buffer(
+                    self.queue.context,
+                    cl.mem_flags.READ_ONLY,
+                    size=self.max_tracers * self.rays * 8,
+                )
+            cl.enqueue_copy(
+                self.queue, self.ray_weights, np.ascontiguousarray(weights), is_blocking=False
+            )
+            return self.ray_weights, 1
+        shared = np.broadcast_to(weights, (self.rays,))
+        key = shared.tobytes()
+        if key != self._weights_key:
+            cl.enqueue_copy(
+                self.queue, self.shared_weights, np.ascontiguousarray(shared), is_blocking=False
+            )
+            self._weights_key = key
+        return self.shared_weights, 0
+
+    def use_canvas(self, shape):
+        """Add every window's counts into a device frame of ``shape = (rows, columns)``."""
+        import pyopencl as cl
+
+        if self.canvas is None or self.canvas_shape != tuple(shape):
+            self.canvas = cl.Buffer(
+                self.queue.context, cl.mem_flags.READ_WRITE, size=max(4, shape[0] * shape[1] * 4)
+            )
+            self.canvas_shape = tuple(shape)
+        cl.enqueue_fill_buffer(self.queue, self.canvas, np.int32(0), 0, shape[0] * shape[1] * 4)
+
+    def read_canvas(self):
+        """The summed counts of the device frame, ``(rows, columns)`` int32."""
+        import pyopencl as cl
+
+        out = np.empty(self.canvas_shape, dtype=np.int32)
+        cl.enqueue_copy(self.queue, out, self.canvas)
+        return out
+
+    def enqueue(self, rays, n_tracers, weights, scales=None, canvas=False):
+        """Image ``n_tracers`` tracers whose rays are in the device buffers ``rays``.
+
+        Parameters
+        ----------
+        rays : tuple of pyopencl.Buffer
+            ``(ray_pixel, ray_steps, ray_code)`` as ``cl/fan.cl`` writes them.
+        n_tracers : int
+        weights : (pyopencl.Buffer, int)
+            From :meth:`set_weights`.
+        scales : ndarray, shape (n_tracers,), optional
+            The reference pass's scales; None for the reference pass.
+        canvas : bool
+            Add the counts into the canvas of :meth:`use_canvas`.
+
+        Returns
+        -------
+        pyopencl.Event
+            The kernel's event.
+        """
+        import pyopencl as cl
+
+        if scales is not None:
+            # non-blocking: the queue keeps the host array until the copy is done
+            host = np.ascontiguousarray(scales, dtype=np.float64)
+            cl.enqueue_copy(self.queue, self.scales, host, is_blocking=False)
+        cl.enqueue_fill_buffer(self.queue, self.counter, np.int32(0), 0, 4)
+        weight_buffer, per_ray = weights
+        canvas_buffer = self.canvas if canvas else self.counter
+        height, width = self.canvas_shape if canvas else (0, 0)
+        renderer = self.imaging.renderer
+        self.kernel.set_args(
+            self.consts,
+            np.int32(n_tracers),
+            np.int32(self.rays),
+            np.int32(renderer.max_window),
+            np.int32(renderer.pad),
+            np.int32(self.radius),
+            np.int32(self.table_width),
+            np.int32(per_ray),
+            np.int32(scales is None),
+            np.int64(self.threshold_fixed),
+            *rays,
+            weight_buffer,
+            self.scales,
+            self.counter,
+            *self.scratch,
+            self.rows_l,
+            self.rows_d,
+            canvas_buffer,
+            np.int32(width),
+            np.int32(height),
+        )
+        return cl.enqueue_nd_range_kernel(self.queue, self.kernel, (self.slots,), (self.group,))
+
+    def enqueue_read(self, rows_l, rows_d):
+        """Non-blocking reads of the rows of the last launch into host arrays."""
+        import pyopencl as cl
+
+        first = cl.enqueue_copy(self.queue, rows_l, self.rows_l, is_blocking=False)
+        return [first, cl.enqueue_copy(self.queue, rows_d, self.rows_d, is_blocking=False)]
+
+    def columns(self, rows_l, rows_d, scales=None):
+        """Per-tracer rows → the columns of :data:`rimcl.imaging.IMAGE_COLUMNS`.
+
+        Parameters
+        ----------
+        rows_l : ndarray, int64, shape (B, 30)
+        rows_d : ndarray, float64, shape (B, 5)
+        scales : ndarray, shape (B,), optional
+            The scales the kernel was given (None: the reference pass).
+
+        Returns
+        -------
+        dict of str to ndarray, shape (B,)
+        """
+        renderer = self.imaging.renderer
+        count = len(rows_l)
+        out = empty_columns(count)
+        flags = rows_l[:, _ROW_FLAGS].copy()
+        area = rows_l[:, _ROW_AREA]
+        origin = np.asarray(renderer.origin, dtype=np.float64)
+        pixel_size = renderer.pixel_size
+        light = rows_d[:, _ROWD_LIGHT]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out["x2_opt"] = origin[0] + rows_d[:, _ROWD_LIGHT_X] / light * pixel_size
+            out["x3_opt"] = origin[1] + rows_d[:, _ROWD_LIGHT_Y] / light * pixel_size
+            if scales is None:
+                scale = renderer.full_scale / rows_d[:, _ROWD_PEAK]
+                scale[~(rows_d[:, _ROWD_PEAK] > 0)] = np.nan
+            else:
+                scale = np.asarray(scales, dtype=np.float64).copy()
+            out["peak"] = rows_d[:, _ROWD_PEAK] * scale
+        out["scale"] = scale
+        out["n_rays_ok"] = rows_l[:, _ROW_USABLE]
+        out["flags"] = flags
+        found = (flags & int(NO_POSITION)) == 0
+        out["area"] = np.where(found, area, 0)
+        threshold = float(self.imaging.threshold)
+        total = rows_l[:, _ROW_SUM].astype(np.float64)
+        moment_col = rows_l[:, _ROW_SUM_COL].astype(np.float64)
+        moment_row = rows_l[:, _ROW_SUM_ROW].astype(np.float64)
+        if self.imaging.centroid_weights == "excess":
+            total = total - threshold * area
+            moment_col = moment_col - threshold * rows_l[:, _ROW_COLS]
+            moment_row = moment_row - threshold * rows_l[:, _ROW_ROWS]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            col = moment_col / 2 / total
+            row = moment_row / 2 / total
+        pixels = np.stack([rows_l[:, _ROW_WINDOW] + col, rows_l[:, _ROW_WINDOW + 1] + row], axis=-1)
+        positions = renderer.to_sheet(pixels[found])
+        out["x2"][found], out["x3"][found] = positions[:, 0], positions[:, 1]
+        histogram = np.zeros((count, 50), dtype=np.int64)
+        histogram[:, list(PERIMETER_SCORES)] = rows_l[:, _ROW_PERIMETER : _ROW_PERIMETER + 10]
+        for k in np.flatnonzero(found):
+            # as skimage: the histogram of scores times the weights, one dot product
+            out["perimeter"][k] = histogram[k] @ self.perimeter_weights
+        out["circularity"][found] = out["perimeter"][found] ** 2 / (4 * np.pi * area[found])
+        return out
+
+
+@dataclasses.dataclass
+class _Batch:
+    """One batch in flight: its tracers, host arrays and pending events."""
+
+    ids: np.ndarray
+    host: dict
+    events: list
+    fan_event: object
+    image_event: object
+    sample_rays: np.ndarray = None
+
+
+class DeviceEngine:
+    """The device pipeline of one measurement (:class:`rimcl.measure.Setup`).
+
+    Device buffers are made once per run; the field of a frame is uploaded once (and kept
+    with the field); batches are double-buffered: the host prepares and sends batch k + 1
+    while the device runs batch k.
+
+    Parameters
+    ----------
+    camera : PlaneCamera or PupilCamera
+    scene : rimcl.camera.Scene
+    imaging : rimcl.imaging.Imaging
+    device : pyopencl.Device
+    batch : int
+        Tracers per batch (raised on GPUs to fill the image slots: :class:`DeviceImager`).
+    """
+
+    @staticmethod
+    def unsupported(camera, imaging, mie):
+        """What of a configuration this engine cannot do yet (None: it can do all of it)."""
+        from rimcl.camera import LensCamera
+
+        if isinstance(camera, LensCamera):
+            return "image through a lens camera (camera.kind = lens)"
+        if imaging.sensor.noise:
+            return "draw sensor noise ([sensor] noise = true)"
+        if imaging.scaling != "reference":
+            return "scale each image to its own peak (renderer.scale = per_image)"
+        if mie is not None:
+            return "weight rays by Mie scattering ([mie] enabled)"
+        return None
+
+    def __init__(self, camera, scene, imaging, device, batch, first_tracer=0):
+        import pyopencl as cl
+
+        from rimcl.device import context_for
+
+        require_fp64(device)
+        self.camera, self.scene, self.imaging, self.device = camera, scene, imaging, device
+        self.first_tracer = int(first_tracer)  # of a shard: the sampler counts rays run-wide
+        self.rays = camera.rays_per_tracer
+        self.queue = _profiling_queue(device)
+        self.imager = DeviceImager(imaging, self.rays, batch, device, self.queue)
+        self.batch = self.imager.max_tracers
+        context = context_for(device)
+        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        self.aims = cl.Buffer(context, ro, hostbuf=np.ascontiguousarray(camera.aim_points()))
+        self.camera_block = cl.Buffer(context, ro, hostbuf=self._camera_block())
+        size = self.batch * self.rays
+        rw = cl.mem_flags.READ_WRITE
+        self.tracers = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.batch * 16)
+        self.ray_buffers = (
+            cl.Buffer(context, rw, size=size * 16),
+            cl.Buffer(context, rw, size=size * 4),
+            cl.Buffer(context, rw, size=size),
+        )
+        self.sample_size = 0
+        self.sample_buffers = None
+        # two sets: the host fills one while the device works from the other
+        self.host_sets = [self._host_arrays(), self._host_arrays()]
+
+    def _camera_block(self):
+        block = np.zeros(_CAM_COUNT, dtype=np.float64)
+        block[0] = self.scene.x_sheet
+        block[1:3] = self.imaging.renderer.origin
+        block[3] = self.imaging.renderer.pixel_size
+        if isinstance(self.camera, PupilCamera):
+            block[4:7] = self.camera.axis
+            block[7:10] = self.camera.centre
+            block[10] = 0.5 * self.camera.diameter
+        return block
+
+    def _fan(self, field, trace_options, positions):
+        """The fan kernel and its trace arguments for this field and settings."""
+        from rimcl.device import context_for
+        from rimcl.program import build_program, get_kernel
+
+        device = self.device
+        probe = self.scene.in_sheet(positions[:1])
+        directions = self.camera.directions(positions[:1])[0]
+        origins = np.repeat(probe, len(directions), axis=0)
+        x_end = self.scene.x_end
+        precision = trace_options["precision"]
+        plan = plan_steps(field, trace_options["step"], x_end, origins, precision)
+        launch = prepare_launch(
+            field,
+            x_end=x_end,
+            plan=plan,
+            interp=trace_options["interp"],
+            precision=precision,
+            device=device,
+            origins=origins,
+            directions=directions,
+            kernel_shape=self._fan_shape(),
+        )
+        defines = {**launch.defines, "RIMCL_CAMERA": int(isinstance(self.camera, PupilCamera))}
+        kernel = get_kernel(build_program(context_for(device), "fan.cl", defines), "trace_fan")
+        return kernel, launch, plan
+
+    def _fan_shape(self):
+        """Rays per work-item of the fan kernel: :data:`FAN_CPU_LANES` on CPUs."""
+        import pyopencl as cl
+
+        shape = default_kernel_shape(self.device)
+        if self.device.type & cl.device_type.CPU:
+            shape = dataclasses.replace(shape, lanes=FAN_CPU_LANES)
+        return shape
+
+    def _sample_buffers(self, count):
+        import pyopencl as cl
+
+        if count > self.sample_size:
+            context = self.queue.context
+            self.sample_size = count
+            self.sample_buffers = (
+                cl.Buffer(context, cl.mem_flags.READ_ONLY, size=count * 4),
+                cl.Buffer(context, cl.mem_flags.READ_WRITE, size=count * _RAY_OUT_STRIDE * 4),
+                cl.Buffer(context, cl.mem_flags.READ_WRITE, size=count * 16),
+            )
+        return self.sample_buffers
+
+    def image_frame(
+        self, setup, pass_, frame, field, positions, scales=None, extras=None, weights=1.0
+    ):
+        """Trace, render and locate every tracer of one frame on the device.
+
+        The device counterpart of the NumPy path of ``rimcl.measure._image_frame``, with
+        the same parameters, plus ``weights``: light per ray, a number, ``(K,)`` (the same
+        fan weights for every tracer, as Mie weights of the initial directions) or
+        ``(N, K)``.
+        """
+        started = time.thread_time()
+        extras = extras or {}
+        sampler, canvas, bar = extras.get("sampler"), extras.get("canvas"), extras.get("bar")
+        kernel, launch, plan = self._fan(field, setup.trace_options, positions)
+        if canvas is not None:
+            self.imager.use_canvas(canvas.counts.shape)
+        per_tracer_weights = np.ndim(weights) == 2
+        shared = None if per_tracer_weights else self.imager.set_weights(weights, 0)
+        host_sets = self.host_sets
+        pending = None
+        for number, first in enumerate(range(0, len(positions), self.batch)):
+            ids = np.arange(first, min(first + self.batch, len(positions)))
+            host = host_sets[number % 2]
+            job = self._launch(
+                kernel,
+                launch,
+                ids,
+                host,
+                positions,
+                None if scales is None else scales[ids],
+                weights[ids] if per_tracer_weights else shared,
+                sampler,
+                canvas is not None,
+            )
+            self.queue.flush()
+            if pending is not None:
+                self._collect(pending, setup, pass_, frame, scales, sampler, bar, positions, plan)
+            pending = job
+        if pending is not None:
+            self._collect(pending, setup, pass_, frame, scales, sampler, bar, positions, plan)
+        if canvas is not None:
+            summed = self.imager.read_canvas()
+            total = canvas.counts.astype(np.int64) + summed
+            canvas.counts[...] = np.minimum(total, canvas.full_scale).astype(np.uint16)
+        self.queue.finish()
+        setup.timings["engine_host"] = setup.timings.get("engine_host", 0.0) + (
+            time.thread_time() - started
+        )
+
+    def _host_arrays(self):
+        return {
+            "tracers": np.empty((self.batch, 2), dtype=np.float64),
+            "rows_l": np.empty((self.batch, _ROW_LONGS), dtype=np.int64),
+            "rows_d": np.empty((self.batch, _ROWD_COUNT), dtype=np.float64),
+        }
+
+    def _launch(self, kernel, launch, ids, host, positions, scales, weights, sampler, canvas):
+        import pyopencl as cl
+
+        count = len(ids)
+        n_rays = count * self.rays
+        tracers = host["tracers"][:count]
+        tracers[...] = positions[ids]
+        cl.enqueue_copy(self.queue, self.tracers, tracers, is_blocking=False)
+        sample_rays = None
+        sample_args = (self.tracers, np.int32(0), self.tracers, self.tracers)
+        if sampler is not None:
+            offset = (self.first_tracer + int(ids[0])) * self.rays
+            lo, hi = np.searchsorted(sampler.chosen, [offset, offset + n_rays])
+            sample_rays = (sampler.chosen[lo:hi] - offset).astype(np.int32)
+            if len(sample_rays):
+                wanted, out, info = self._sample_buffers(len(sample_rays))
+                cl.enqueue_copy(self.queue, wanted, sample_rays, is_blocking=False)
+                sample_args = (wanted, np.int32(len(sample_rays)), out, info)
+        kernel.set_args(
+            launch.field_buffer,
+            launch.counts,
+            launch.params,
+            self.tracers,
+            self.aims,
+            self.camera_block,
+            np.int32(self.rays),
+            np.int32(n_rays),
+            np.int32(launch.max_steps),
+            *self.ray_buffers,
+            *sample_args,
+        )
+        items = -(-n_rays // launch.shape.lanes)
+        items = -(-items // FAN_GROUP) * FAN_GROUP
+        fan_event = cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), (FAN_GROUP,))
+        events = []
+        if sample_rays is not None and len(sample_rays):
+            host["sample_out"] = np.empty((len(sample_rays), _RAY_OUT_STRIDE), dtype=np.float32)
+            host["sample_info"] = np.empty((len(sample_rays), 4), dtype=np.int32)
+            events.append(
+                cl.enqueue_copy(self.queue, host["sample_out"], sample_args[2], is_blocking=False)
+            )
+            events.append(
+                cl.enqueue_copy(self.queue, host["sample_info"], sample_args[3], is_blocking=False)
+            )
+        if isinstance(weights, tuple):
+            weight_arg = weights
+        else:
+            weight_arg = self.imager.set_weights(weights, count)
+        image_event = self.imager.enqueue(self.ray_buffers, count, weight_arg, scales, canvas)
+        events += self.imager.enqueue_read(host["rows_l"][:count], host["rows_d"][:count])
+        return _Batch(ids, host, events, fan_event, image_event, sample_rays)
+
+    def _collect(self, job, setup, pass_, frame, scales, sampler, bar, positions, plan):
+        import pyopencl as cl
+
+        cl.wait_for_events(job.events)
+        count = len(job.ids)
+        rows_l, rows_d = job.host["rows_l"][:count], job.host["rows_d"][:count]
+        columns = self.imager.columns(rows_l, rows_d, None if scales is None else scales[job.ids])
+        for name, values in columns.items():
+            pass_.images[name][frame, job.ids] = values
+        pass_.status_counts += rows_l[:, _ROW_STATUS : _ROW_STATUS + len(STATUS_NAMES)].sum(0)
+        pass_.vignetted += int(rows_l[:, _ROW_VIGNETTED].sum())
+        pass_.ray_steps += int(rows_l[:, _ROW_STEPS].sum())
+        setup.timings["trace"] += _seconds(job.fan_event)
+        setup.timings["render"] += _seconds(job.image_event)
+        if job.sample_rays is not None and len(job.sample_rays):
+            self._take_sample(job, sampler, positions, plan)
+        if bar is not None:
+            bar.update(count)
+
+    def _take_sample(self, job, sampler, positions, plan):
+        """Hand the sampled rays to the run's sampler as the NumPy path does."""
+        local = job.sample_rays.astype(np.int64)
+        tracer = job.ids[local // self.rays]
+        aim = local % self.rays
+        unique, which = np.unique(tracer, return_inverse=True)
+        directions = self.camera.directions(positions[unique])[which, aim]
+        origins, directions = _validate_rays(self.scene.in_sheet(positions[tracer]), directions)
+        rows = _finish(
+            origins, directions, job.host["sample_out"], job.host["sample_info"], plan.step, {}
+        )
+        collected = rows.ok & self.camera.collected(rows.end_pos, rows.end_dir)
+        batch_rays = len(job.ids) * self.rays
+        sparse = _SparseRays(batch_rays, local, rows)
+        full_collected = np.zeros(batch_rays, dtype=bool)
+        full_collected[local] = collected
+        sampler.take((self.first_tracer + int(job.ids[0])) * self.rays, sparse, full_collected)
+
+
+class _SparseRays:
+    """The sampled rays of a batch, at their places in the batch (other rows unset): what
+    the run's sampler reads from a :class:`rimcl.trace.TraceResult`."""
+
+    def __init__(self, count, rows, result):
+        for name in ("origins", "directions", "image_pos", "n_metric"):
+            values = np.empty((count, 3))
+            values[rows] = getattr(result, name)
+            setattr(self, name, values)
+        for name in ("deflection", "path_length"):
+            values = np.empty(count)
+            values[rows] = getattr(result, name)
+            setattr(self, name, values)
+        self.status = np.empty(count, dtype=result.status.dtype)
+        self.status[rows] = result.status
+
+
+def image_points(imaging, points, usable, weights, flags, scales=None, device=None, canvas=None):
+    """Render, digitise and locate each tracer of a batch on the device.
+
+    The device counterpart of :func:`rimcl.imaging.image_batch`, with its parameters and
+    columns, for image points computed elsewhere (the device pipeline of a measurement
+    makes them on the device instead).
+
+    Parameters
+    ----------
+    imaging : rimcl.imaging.Imaging
+    points : ndarray, float64, shape (B, K, 2)
+    usable : ndarray, bool, shape (B, K)
+    weights : float or ndarray, shape (K,) or (B, K)
+    flags : ndarray, int, shape (B,)
+    scales : ndarray, shape (B,), optional
+    device : str or pyopencl.Device, optional
+    canvas : rimcl.render.FrameImage, optional
+
+    Returns
+    -------
+    dict of str to ndarray, shape (B,)
+    """
+    import pyopencl as cl
+
+    from rimcl.device import context_for, select_device
+
+    device = select_device(device)
+    count, rays = usable.shape
+    queue = _profiling_queue(device)
+    imager = DeviceImager(imaging, rays, count, device, queue)
+    pixels = imaging.renderer.to_pixels(points.reshape(-1, 2))
+    pixels[~usable.reshape(-1)] = np.nan
+    # unusable rays enter as failed ones; the flags of the caller replace the kernel's
+    code = np.where(usable.reshape(-1), _RAY_COLLECTED, 1).astype(np.uint8)
+    context = context_for(device)
+    ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+    buffers = (
+        cl.Buffer(context, ro, hostbuf=np.ascontiguousarray(pixels)),
+        cl.Buffer(context, ro, hostbuf=np.zeros(count * rays, dtype=np.int32)),
+        cl.Buffer(context, ro, hostbuf=code),
+    )
+    if canvas is not None:
+        imager.use_canvas(canvas.counts.shape)
+    imager.enqueue(buffers, count, imager.set_weights(weights, count), scales, canvas is not None)
+    rows_l = np.empty((count, _ROW_LONGS), dtype=np.int64)
+    rows_d = np.empty((count, _ROWD_COUNT), dtype=np.float64)
+    cl.wait_for_events(imager.enqueue_read(rows_l, rows_d))
+    out = imager.columns(rows_l, rows_d, scales)
+    known = int(TracerFlag.RAYS_FAILED | TracerFlag.RAYS_VIGNETTED)
+    out["flags"] = (out["flags"] & ~known) | np.asarray(flags, dtype=np.int64)
+    if canvas is not None:
+        total = canvas.counts.astype(np.int64) + imager.read_canvas()
+        canvas.counts[...] = np.minimum(total, canvas.full_scale).astype(np.uint16)
+    return out

@@ -1,0 +1,196 @@
+"""The device engine against the NumPy engine (DESIGN §14): same flags, same centroids.
+
+Where the digitised images of the two engines are identical (compared through the frame
+image of all windows), centroids must be identical to the last bit (the device returns
+exact integer moments and the host divides as the NumPy engine does); elsewhere within
+1e-3 px. Image points cover every path of the imaging: compact and wide clouds, windows
+capped around the median with rays lost outside, split images with an exact tie in light,
+saturation, images below the threshold, tracers without rays.
+"""
+
+import numpy as np
+import pytest
+
+from rimcl.centroid import TracerFlag
+from rimcl.config import MeasureConfig
+from rimcl.engine import image_points
+from rimcl.errors import RimclError
+from rimcl.imaging import Imaging, image_batch
+from rimcl.measure import run_render
+from rimcl.render import FrameImage, Renderer
+
+PIXEL = 1 / 512  # pixel size of the synthetic clouds (a unit field of view)
+RAYS = 96
+
+
+def _clouds(rng):
+    """Image points ``(B, K, 2)`` (sheet units) and usable masks of one tracer per path."""
+    centre = lambda: rng.uniform(0.2, 0.8, size=2)  # noqa: E731
+    gauss = lambda width: centre() + width * PIXEL * rng.normal(size=(RAYS, 2))  # noqa: E731
+    # two identical clusters 24 px apart on dyadic positions: an exact tie in light
+    jitter = rng.integers(-2, 3, size=(RAYS // 2, 2)) * PIXEL / 4
+    twin = np.array([200.25, 150.5]) * PIXEL + np.concatenate([jitter, jitter])
+    twin[RAYS // 2 :, 0] += 24 * PIXEL
+    clouds = [
+        gauss(0.3),
+        np.repeat(centre()[None], RAYS, axis=0),  # every ray on one point
+        gauss(3.0),
+        twin,
+        gauss(40.0),  # wider than the largest window: capped, rays outside
+        centre() + 30 * PIXEL * rng.uniform(-1, 1, size=(RAYS, 2)),
+        gauss(1.0),  # no usable ray
+        gauss(1.0),  # a third of the rays unusable
+        np.floor(gauss(2.0) / PIXEL) * PIXEL,  # on pixel corners (binning at edges)
+        gauss(0.05),
+    ]
+    points = np.stack(clouds)
+    usable = np.ones(points.shape[:2], dtype=bool)
+    usable[6] = False
+    usable[7, ::3] = False
+    return points, usable
+
+
+def _imaging(kind, bits, weights):
+    renderer = Renderer(kind, PIXEL, (0.0, 0.0), 1.5, 48, bits)
+    return Imaging(renderer, 40.0 * (2**bits - 1) / 1023 // 1, weights)
+
+
+def _both(imaging, points, usable, weights, flags, scales, device):
+    images = []
+    columns = []
+    for engine in (image_batch, image_points):
+        canvas = FrameImage(512, 512, imaging.renderer.full_scale)
+        extra = {} if engine is image_batch else {"device": device}
+        columns.append(
+            engine(imaging, points, usable, weights, flags, scales, canvas=canvas, **extra)
+        )
+        images.append(canvas.counts)
+    return columns, np.array_equal(*images)
+
+
+def _assert_same(numpy_columns, device_columns, same_images):
+    assert np.array_equal(numpy_columns["flags"], device_columns["flags"])
+    for name in ("area", "n_rays_ok"):
+        assert np.array_equal(numpy_columns[name], device_columns[name]), name
+    for name in ("x2", "x3"):
+        expected, got = numpy_columns[name], device_columns[name]
+        if same_images:
+            np.testing.assert_array_equal(got, expected, err_msg=name)
+        else:
+            np.testing.assert_allclose(got, expected, rtol=0, atol=1e-3 * PIXEL, err_msg=name)
+    for name in ("perimeter", "circularity", "peak", "scale"):
+        np.testing.assert_allclose(
+            device_columns[name], numpy_columns[name], rtol=1e-12, err_msg=name
+        )
+    for name in ("x2_opt", "x3_opt"):
+        np.testing.assert_allclose(
+            device_columns[name], numpy_columns[name], rtol=0, atol=1e-9 * PIXEL, err_msg=name
+        )
+
+
+@pytest.mark.parametrize(
+    ("kind", "bits", "weights"),
+    [
+        ("exact", 10, "excess"),
+        ("exact", 16, "grey"),
+        ("paper", 10, "grey"),
+        ("paper", 16, "excess"),
+    ],
+)
+def test_image_points_match_the_numpy_engine(device, kind, bits, weights):
+    rng = np.random.default_rng(7)
+    points, usable = _clouds(rng)
+    imaging = _imaging(kind, bits, weights)
+    flags = np.zeros(len(points), dtype=np.int64)
+    flags[3] = int(TracerFlag.RAYS_FAILED)  # flags known before imaging are kept
+    light = np.tile(rng.uniform(0.5, 1.5, size=RAYS // 2), 2)  # uneven, the same per twin
+    (reference, device_reference), same = _both(imaging, points, usable, light, flags, None, device)
+    _assert_same(reference, device_reference, same)
+    seen = np.bitwise_or.reduce(reference["flags"])
+    for flag in ("NO_RAYS", "SPLIT", "TOUCHES_EDGE", "RAYS_OUTSIDE_WINDOW", "RAYS_FAILED"):
+        assert seen & TracerFlag[flag], flag
+    # the twins tie: the first component in raster order is the tracer's
+    assert reference["flags"][3] & TracerFlag.SPLIT
+    assert abs(reference["x2"][3] / PIXEL - 200.25) < 1
+
+    # the measured pass: the reference's scales; brighter (saturated) and dimmer images
+    centre = np.nanmean(points, axis=1, keepdims=True)
+    squeezed = centre + 0.6 * (points - centre)
+    squeezed[1::2] = centre[1::2] + 4.0 * (points[1::2] - centre[1::2])
+    (measured, device_measured), same = _both(
+        imaging, squeezed, usable, light, flags, reference["scale"], device
+    )
+    _assert_same(measured, device_measured, same)
+    seen = np.bitwise_or.reduce(measured["flags"])
+    assert seen & TracerFlag.SATURATED
+    assert seen & TracerFlag.BELOW_THRESHOLD
+
+
+def test_image_points_are_deterministic(device):
+    points, usable = _clouds(np.random.default_rng(3))
+    imaging = _imaging("exact", 12, "excess")
+    flags = np.zeros(len(points), dtype=np.int64)
+    first = image_points(imaging, points, usable, 1.0, flags, device=device)
+    again = image_points(imaging, points, usable, 1.0, flags, device=device)
+    for name, values in first.items():
+        np.testing.assert_array_equal(again[name], values, err_msg=name)
+
+
+def test_ray_weights_of_the_wrong_shape_are_refused(device):
+    points, usable = _clouds(np.random.default_rng(3))
+    imaging = _imaging("exact", 10, "excess")
+    with pytest.raises(RimclError, match="ray weights of shape"):
+        image_points(imaging, points, usable, np.ones((2, 3)), np.zeros(len(points)), device=device)
+
+
+def _render(engine, case, **options):
+    config = MeasureConfig.from_options(engine=engine, frame_image=True, **options)
+    return run_render(None, case=case, config=config)
+
+
+SAMPLE = {"tracers": 10, "fan": 8, "pupil_rays": 64, "pixels": 1024, "psf_sigma": 2.5}
+
+
+@pytest.mark.parametrize(
+    ("case", "options"),
+    [
+        ("C0", {"camera": "plane", "renderer": "exact", "bit_depth": 10}),
+        ("C1", {"camera": "pupil", "renderer": "paper", "bit_depth": 16}),
+        ("C2", {"camera": "plane", "renderer": "paper", "centroid_weights": "grey"}),
+        ("C3", {"camera": "pupil", "renderer": "exact", "bit_depth": 16, "view_angle": 20.0}),
+        ("C4", {"camera": "plane", "renderer": "exact", "max_window": 24, "bit_depth": 12}),
+        ("C4", {"camera": "pupil", "renderer": "paper", "aperture_diameter": 1.0}),
+    ],
+)
+def test_measurement_matches_the_numpy_engine(device, case, options):
+    """The shipped sample through both engines: trace, collection, images, rows, sample."""
+    options = {**SAMPLE, "device": device, **options}
+    numpy_result = _render("numpy", case, **options)
+    device_result = _render("device", case, **options)
+    pixel = numpy_result.attrs["pixel_size"]
+    same_images = np.array_equal(numpy_result.frame_image, device_result.frame_image)
+    expected, got = numpy_result.tracers, device_result.tracers
+    for name, values in expected.items():
+        if name.startswith(("flags", "notes", "area", "n_rays", "id", "frame")):
+            np.testing.assert_array_equal(got[name], values, err_msg=name)
+        elif name.startswith(("x2_", "x3_")) and "opt" not in name and "true" not in name:
+            if same_images:
+                np.testing.assert_array_equal(got[name], values, err_msg=name)
+            else:
+                np.testing.assert_allclose(got[name], values, rtol=0, atol=1e-3 * pixel)
+        else:
+            np.testing.assert_allclose(got[name], values, rtol=1e-12, atol=1e-9 * pixel)
+    for name, values in numpy_result.rays.items():
+        np.testing.assert_array_equal(device_result.rays[name], values, err_msg=name)
+    assert device_result.ray_attrs == numpy_result.ray_attrs
+    assert device_result.config["engine"] == "device"
+
+
+def test_device_engine_reuses_the_reference_of_another_case(device):
+    options = {**SAMPLE, "device": device, "frames": 2}
+    first = _render("device", "C1", **options)
+    config = MeasureConfig.from_options(engine="device", **options)
+    again = run_render(None, case="C2", config=config, reference=first.reference)
+    fresh = run_render(None, case="C2", config=config)
+    for name, values in fresh.tracers.items():
+        np.testing.assert_array_equal(again.tracers[name], values, err_msg=name)
