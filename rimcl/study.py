@@ -55,6 +55,7 @@ RUN_ONLY_KEYS = (
     ("run", "mode"),
     ("run", "scheduler"),
     ("run", "shard_tracers"),
+    ("run", "engine"),
 )
 #: File that marks a directory as a rimcl study (and is locked while a study runs in it).
 MARKER = ".rimcl-study"
