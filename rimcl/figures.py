@@ -1123,8 +1123,11 @@ def draw_figure(name, all_tables, stats):
     return figure, data
 
 
-def _save(figure, name, data, stats, out_dir, overwrite):
-    """``<name>.png``, ``.pdf`` (versions in the metadata) and ``.json`` (the numbers)."""
+def save_figure(figure, name, data, stats, out_dir, overwrite):
+    """``<name>.png``, ``.pdf`` (versions in the metadata) and ``.json`` (the numbers).
+
+    ``stats`` needs ``versions`` and ``config`` (recorded in every file).
+    """
     description = to_json({"versions": stats["versions"], "numbers": f"see {name}.json"})
     targets = {
         "png": {
@@ -1179,7 +1182,7 @@ def write_figures(all_tables, stats, out_dir, overwrite=True):
     written = []
     for name in FIGURE_NAMES:
         figure, data = draw_figure(name, all_tables, stats)
-        written += _save(figure, name, data, stats, out_dir, overwrite)
+        written += save_figure(figure, name, data, stats, out_dir, overwrite)
     return written
 
 
@@ -1377,7 +1380,7 @@ def write_dt_sweep_figure(stats_by_dt, out_dir, overwrite=True, name="dt_sweep")
     figure, data = draw_dt_sweep(stats_by_dt)
     first = stats_by_dt[min(stats_by_dt)]
     record = {"config": {"dt_sweep": sorted(stats_by_dt)}, "versions": first["versions"]}
-    _save(figure, name, data, record, out_dir, overwrite)
+    save_figure(figure, name, data, record, out_dir, overwrite)
     return data["panels"]
 
 
@@ -1452,4 +1455,4 @@ def write_numerics_figure(numerics, out_dir, versions, overwrite=True, name="num
     )
     data = {"panels": panels, "ratios": {k: v for k, v in numerics.items() if "ratio" in k}}
     record = {"config": {"numerics": {"case": numerics["case"]}}, "versions": versions}
-    return _save(figure, name, data, record, out_dir, overwrite)
+    return save_figure(figure, name, data, record, out_dir, overwrite)

@@ -22,7 +22,6 @@ from pathlib import Path
 import numpy as np
 from matplotlib.colors import LogNorm
 
-from rimcl import __version__
 from rimcl.figures import (
     _case_colors,
     _case_label,
@@ -31,10 +30,10 @@ from rimcl.figures import (
     _new_figure,
     _pdf_series,
     _relative_errors,
+    save_figure,
 )
 from rimcl.piv_study import velocity_table
-from rimcl.provenance import atomic_path, to_json, versions
-from rimcl.stats import write_json
+from rimcl.provenance import versions
 
 FIGURE_NAMES = ("piv_vectors", "piv_error_maps", "piv_error_pdfs")
 #: Arrows drawn along each axis of a vector map at most (every k-th vector beyond).
@@ -305,30 +304,9 @@ def write_piv_figures(cases, out_dir, config=None, overwrite=True):
     cases = sorted(cases, key=lambda case: case[1]["delta_n_max"])
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    record = versions()
-    description = to_json({"versions": record, "numbers": "see <name>.json"})
+    record = {"versions": versions(), "config": config or {}}
     written = []
     for name in FIGURE_NAMES:
         figure, data = draw_piv_figure(name, cases)
-        metadata = {
-            "png": {
-                "Title": f"rimcl {name}",
-                "Software": f"rimcl {__version__}",
-                "Description": description,
-            },
-            "pdf": {
-                "Title": f"rimcl {name}",
-                "Creator": f"rimcl {__version__}",
-                "Subject": description,
-            },
-        }
-        for extension, tags in metadata.items():
-            path = out_dir / f"{name}.{extension}"
-            with atomic_path(path, overwrite=overwrite) as tmp:
-                figure.savefig(tmp, format=extension, metadata=tags)
-            written.append(path)
-        path = out_dir / f"{name}.json"
-        document = {"figure": name, **data, "config": config or {}, "versions": record}
-        write_json(path, document, overwrite=overwrite)
-        written.append(path)
+        written += save_figure(figure, name, data, record, out_dir, overwrite)
     return written
