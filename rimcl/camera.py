@@ -87,7 +87,11 @@ class Scene:
             )
         depth = float(hi[0] - x_sheet if depth is None else depth)
         if not np.isfinite(depth) or depth <= 0:
-            raise RimclError(f"the field depth L1 must be positive, got {depth}")
+            raise RimclError(
+                f"the traced depth (field.depth) from the sheet x1 = {x_sheet:g} must be "
+                f"positive, got {depth:g}: put the sheet inside the grid ({lo[0]:g} .. "
+                f"{hi[0]:g}) or give field.depth"
+            )
         x_end = x_sheet + depth
         if not periodic and x_end > hi[0] * (1 + 1e-12) + 1e-12:
             raise RimclError(
