@@ -8,7 +8,8 @@ in one run mean anything. This script times, on one field and one ray set, inter
 - ``rimcl.trace_rays`` with every interpolation x precision the device supports (warm:
   kernel build and field upload excluded);
 - on CPUs, the kernel shapes of DESIGN §11 (rays per work-item, the PoCL switch) for the
-  default trilinear f32c.
+  default trilinear f32c, and the 16 rays per work-item of the device engine's fan kernel
+  (``rimcl.engine.FAN_CPU_LANES``).
 
 and prints a compact table (ray-steps/s, best of the repeats; ratio = median over the
 repeats of the paired ratios to numba) plus the largest difference of r' between the
@@ -32,6 +33,7 @@ import numpy as np
 import rimcl
 from rimcl.bench import synthetic_density
 from rimcl.device import describe_device, has_fp64
+from rimcl.engine import FAN_CPU_LANES
 from rimcl.provenance import to_json, versions
 from rimcl.rays import fan_rays, scene_for
 from rimcl.trace import INTERPOLATIONS, PRECISIONS, KernelShape, default_kernel_shape
@@ -82,8 +84,9 @@ def main():
         and (precision != "f64" or has_fp64(device))
     ]
     default = ("trilinear", "f32c", default_shape)
-    if default_shape.lanes > 1:  # the kernel shapes of DESIGN §11
-        for lanes, pocl_fast in ((1, False), (1, True), (default_shape.lanes, False)):
+    if default_shape.lanes > 1:  # the kernel shapes of DESIGN §11, and the device engine's
+        shapes = ((1, False), (1, True), (default_shape.lanes, False), (FAN_CPU_LANES, True))
+        for lanes, pocl_fast in shapes:
             if (lanes, pocl_fast) != (default_shape.lanes, default_shape.pocl_fast):
                 settings.append(("trilinear", "f32c", KernelShape(lanes, pocl_fast)))
 

@@ -19,10 +19,18 @@ the digitised images agree the centroids agree to the last bit. The image points
 windows are computed with the NumPy engine's float64 operations; the renders differ only
 by the summation order of float64 sums (about 1e-16 of a pixel's light).
 
-Deterministic: no floating-point atomics; components are merged with integer atomics
-whose result does not depend on their order; every sum runs in a fixed order. Memory is
-bounded by the batch size and the scratch slots, whatever the number of tracers. Needs a
-device with ``cl_khr_fp64`` (CPUs, NVIDIA and AMD GPUs).
+One work-item images one tracer at a time, sequentially, in its own scratch slot, and
+takes the next tracer from a shared counter: on a CPU a few slots per core, on a GPU
+thousands (batches are enlarged to fill them). Deterministic: every sum runs in a fixed
+order and no floating-point value is added atomically (only the optional full-frame
+picture adds integer counts atomically), so the numbers are the same run to run. Memory is
+bounded by the batch size and the slots, whatever the number of tracers. Needs a device
+with ``cl_khr_fp64`` (CPUs, NVIDIA and AMD GPUs).
+
+Stage times of a measurement (``RenderResult.timings``): ``trace`` is the fan kernel,
+``render`` the image kernel (render and locate: ``centroid`` stays 0), ``engine_host``
+the main thread's CPU time in the engine's frame loop (batches prepared, rows read and
+turned into columns).
 """
 
 import dataclasses
@@ -37,6 +45,7 @@ from rimcl.errors import RimclError
 from rimcl.imaging import empty_columns
 from rimcl.render import TRUNCATE_SIGMAS
 from rimcl.trace import (
+    _RAY_OUT_STRIDE,
     STATUS_NAMES,
     _finish,
     _validate_rays,
@@ -60,7 +69,6 @@ PERIMETER_SCORES = (5, 7, 13, 15, 17, 21, 23, 25, 27, 33)
 
 _RAY_COLLECTED = 8  # ray code bit of cl/fan.cl
 _CAM_COUNT = 11  # camera block of cl/fan.cl
-_RAY_OUT_STRIDE = 17
 #: Tracer images in flight per CPU core (slots taken from a shared counter: balanced).
 CPU_SLOTS_PER_CORE = 4
 #: Tracer images in flight per GPU multiprocessor (one work-item each).
