@@ -14,6 +14,8 @@
  *   RIMCL_PERIODIC; optional RIMCL_LANES, RIMCL_POCL_FAST, RIMCL_ADAPTIVE) and
  *   RIMCL_CAMERA: 0 plane camera (every ray that reaches the exit plane is collected),
  *   1 pupil camera (a ray is collected if its straight continuation passes the pupil).
+ * Optional: RIMCL_MIE (rimcl_mie.h): 0 (default) every ray weighs 1 and ray_weight is not
+ *   written; otherwise each ray's Mie weight from its initial direction goes to ray_weight.
  * Needs cl_khr_fp64.
  * Units: lengths in field units; image points in pixels of the camera (pixel i spans
  *   [i, i + 1) from the image origin).
@@ -27,11 +29,14 @@
  * ray_pixel (n_rays double2): image point (x2, x3) in pixels; NaN unless collected.
  * ray_steps (n_rays int): steps taken.
  * ray_code  (n_rays uchar): status (RAY_*, bits 0-2) | RAY_COLLECTED.
+ * mie (rimcl_mie.h layout), mie_terms: the Mie series; ray_weight (n_rays doubles): the
+ *   rays' Mie weights (RIMCL_MIE > 0 only).
  * sample_rays (n_sample ints, increasing): rays of the batch whose exit records are
  *   also written, to sample_out (n_sample x RAY_OUT_STRIDE floats) and sample_info, as
  *   trace.cl writes them.
  */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#include "rimcl_mie.h"
 #include "rimcl_trace.h"
 
 #ifndef RIMCL_CAMERA
@@ -74,7 +79,9 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
                         const int n_rays, const int max_steps, __global double2 *ray_pixel,
                         __global int *ray_steps, __global uchar *ray_code,
                         __global const int *sample_rays, const int n_sample,
-                        __global float *sample_out, __global int4 *sample_info)
+                        __global float *sample_out, __global int4 *sample_info,
+                        __global const double *mie, const int mie_terms,
+                        __global double *ray_weight)
 {
     const int first = get_global_id(0) * RIMCL_LANES;
     if (first >= n_rays)
@@ -95,6 +102,11 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
         double length = norm3(d[0], d[1], d[2]);
         for (int q = 0; q < 3; ++q)
             d[q] = d[q] / length;
+#if RIMCL_MIE
+        /* the host weighs the camera's unit directions, before trace_rays normalises again */
+        if (first + k < n_rays)
+            ray_weight[ray] = mie_weight(mie, mie_terms, d);
+#endif
         length = norm3(d[0], d[1], d[2]);
         float o_hi[3], o_lo[3], d_hi[3], d_lo[3];
         for (int q = 0; q < 3; ++q) {

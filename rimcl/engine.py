@@ -415,7 +415,7 @@ class DeviceEngine:
     """
 
     @staticmethod
-    def unsupported(camera, imaging, mie):
+    def unsupported(camera, imaging):
         """What of a configuration this engine cannot do yet (None: it can do all of it)."""
         from rimcl.camera import LensCamera
 
@@ -425,11 +425,9 @@ class DeviceEngine:
             return "draw sensor noise ([sensor] noise = true)"
         if imaging.scaling != "reference":
             return "scale each image to its own peak (renderer.scale = per_image)"
-        if mie is not None:
-            return "weight rays by Mie scattering ([mie] enabled)"
         return None
 
-    def __init__(self, camera, scene, imaging, device, batch, first_tracer=0):
+    def __init__(self, camera, scene, imaging, device, batch, first_tracer=0, mie=None):
         import pyopencl as cl
 
         from rimcl.device import context_for
@@ -455,6 +453,16 @@ class DeviceEngine:
         )
         self.sample_size = 0
         self.sample_buffers = None
+        # Mie weights: made by the fan kernel from each ray's initial direction
+        self.mie_mode = 0
+        self.mie_args = (self.aims, np.int32(0), self.aims)
+        if mie is not None:
+            self.mie_mode, table = mie.device_table()
+            self.mie_args = (
+                cl.Buffer(context, ro, hostbuf=table),
+                np.int32((len(table) - 6) // 4),
+                cl.Buffer(context, rw, size=size * 8),
+            )
         # two sets: the host fills one while the device works from the other
         self.host_sets = [self._host_arrays(), self._host_arrays()]
 
@@ -492,7 +500,11 @@ class DeviceEngine:
             directions=directions,
             kernel_shape=self._fan_shape(),
         )
-        defines = {**launch.defines, "RIMCL_CAMERA": int(isinstance(self.camera, PupilCamera))}
+        defines = {
+            **launch.defines,
+            "RIMCL_CAMERA": int(isinstance(self.camera, PupilCamera)),
+            "RIMCL_MIE": self.mie_mode,
+        }
         kernel = get_kernel(build_program(context_for(device), "fan.cl", defines), "trace_fan")
         return kernel, launch, plan
 
@@ -604,6 +616,7 @@ class DeviceEngine:
             np.int32(launch.max_steps),
             *self.ray_buffers,
             *sample_args,
+            *self.mie_args,
         )
         items = -(-n_rays // launch.shape.lanes)
         items = -(-items // FAN_GROUP) * FAN_GROUP
@@ -618,7 +631,9 @@ class DeviceEngine:
             events.append(
                 cl.enqueue_copy(self.queue, host["sample_info"], sample_args[3], is_blocking=False)
             )
-        if isinstance(weights, tuple):
+        if self.mie_mode:
+            weight_arg = (self.mie_args[2], 1)
+        elif isinstance(weights, tuple):
             weight_arg = weights
         else:
             weight_arg = self.imager.set_weights(weights, count)

@@ -119,6 +119,13 @@ class MieWeights:
         """``cos θ = k · d`` of unit ray directions ``(..., 3)`` → ``(...)``."""
         return np.asarray(directions, dtype=np.float64) @ np.asarray(self.sheet_direction)
 
+    def _scaled_coefficients(self):
+        """``(2n + 1) / (n (n + 1))`` times ``a_n`` and ``b_n``, complex, shape (n_terms,)."""
+        a, b = miepython.coefficients(self.relative_index, self.size_parameter)
+        order = np.arange(1, len(a) + 1)
+        scale = (2 * order + 1) / (order * (order + 1))
+        return scale * a, scale * b
+
     def intensities(self, cosines):
         """``|S1|²`` and ``|S2|²`` (Wiscombe normalisation) at scattering cosines.
 
@@ -133,10 +140,7 @@ class MieWeights:
             ``|S1|²`` and ``|S2|²``.
         """
         mu = np.clip(np.asarray(cosines, dtype=np.float64).reshape(-1), -1.0, 1.0)
-        a, b = miepython.coefficients(self.relative_index, self.size_parameter)
-        order = np.arange(1, len(a) + 1)
-        scale = (2 * order + 1) / (order * (order + 1))
-        scaled_a, scaled_b = scale * a, scale * b
+        scaled_a, scaled_b = self._scaled_coefficients()
         perpendicular = np.empty(mu.shape)
         parallel = np.empty(mu.shape)
         for start in range(0, len(mu), _ANGLE_CHUNK):
@@ -145,6 +149,27 @@ class MieWeights:
             perpendicular[part] = np.abs(s1) ** 2
             parallel[part] = np.abs(s2) ** 2
         return perpendicular, parallel
+
+    def device_table(self):
+        """The series as ``cl/rimcl_mie.h`` reads it, and its ``RIMCL_MIE`` mode.
+
+        Returns
+        -------
+        mode : int
+            1 perpendicular, 2 parallel, 3 unpolarised, 4 a polarisation direction.
+        table : ndarray, float64, shape (6 + 4 n_terms,)
+            Sheet direction, polarisation direction (zeros unless mode 4), then the scaled
+            ``a_n``, ``b_n`` of every order as ``(Re a, Im a, Re b, Im b)``.
+        """
+        scaled_a, scaled_b = self._scaled_coefficients()
+        terms = np.stack([scaled_a.real, scaled_a.imag, scaled_b.real, scaled_b.imag])
+        modes = {"perpendicular": 1, "parallel": 2, "unpolarised": 3}
+        if isinstance(self.polarisation, str):
+            mode, polarisation = modes[self.polarisation], np.zeros(3)
+        else:
+            mode, polarisation = 4, np.asarray(self.polarisation, dtype=np.float64)
+        table = np.concatenate([self.sheet_direction, polarisation, terms.T.reshape(-1)])
+        return mode, np.ascontiguousarray(table, dtype=np.float64)
 
     def weights(self, directions):
         """Light carried by each ray, from its initial unit direction.

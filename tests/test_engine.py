@@ -8,11 +8,13 @@ capped around the median with rays lost outside, split images with an exact tie 
 saturation, images below the threshold, tracers without rays.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from rimcl.centroid import TracerFlag
-from rimcl.config import MeasureConfig
+from rimcl.config import MeasureConfig, MieConfig
 from rimcl.engine import image_points
 from rimcl.errors import RimclError
 from rimcl.imaging import Imaging, image_batch
@@ -144,8 +146,10 @@ def test_ray_weights_of_the_wrong_shape_are_refused(device):
         image_points(imaging, points, usable, np.ones((2, 3)), np.zeros(len(points)), device=device)
 
 
-def _render(engine, case, **options):
+def _render(engine, case, mie=None, **options):
     config = MeasureConfig.from_options(engine=engine, frame_image=True, **options)
+    if mie is not None:
+        config = dataclasses.replace(config, mie=mie)
     return run_render(None, case=case, config=config)
 
 
@@ -166,8 +170,38 @@ SAMPLE = {"tracers": 10, "fan": 8, "pupil_rays": 64, "pixels": 1024, "psf_sigma"
 def test_measurement_matches_the_numpy_engine(device, case, options):
     """The shipped sample through both engines: trace, collection, images, rows, sample."""
     options = {**SAMPLE, "device": device, **options}
-    numpy_result = _render("numpy", case, **options)
-    device_result = _render("device", case, **options)
+    _assert_engines_agree(_render("numpy", case, **options), _render("device", case, **options))
+
+
+@pytest.mark.parametrize(
+    ("polarisation", "camera"),
+    [
+        ("unpolarised", "plane"),
+        ("perpendicular", "pupil"),
+        ("parallel", "plane"),
+        ("linear", "pupil"),
+    ],
+)
+def test_mie_weights_are_made_on_the_device_as_on_the_host(device, polarisation, camera):
+    """Mie weights from the fan kernel: the same light, optics means and images."""
+    mie = MieConfig(
+        enabled=True,
+        diameter_um=2.0,
+        polarisation=polarisation,
+        polarisation_direction=(0.6, 0.0, 0.8),
+        sheet_direction=(0.0, 1.0, 0.0),
+    )
+    options = {**SAMPLE, "device": device, "camera": camera, "bit_depth": 16}
+    numpy_result = _render("numpy", "C2", mie=mie, **options)
+    device_result = _render("device", "C2", mie=mie, **options)
+    assert numpy_result.config["mie"]["polarisation"] == device_result.config["mie"]["polarisation"]
+    # the weights matter: the same scene without them images differently
+    plain = _render("numpy", "C2", **options)
+    assert not np.array_equal(plain.tracers["x2_opt"], numpy_result.tracers["x2_opt"])
+    _assert_engines_agree(numpy_result, device_result)
+
+
+def _assert_engines_agree(numpy_result, device_result):
     pixel = numpy_result.attrs["pixel_size"]
     same_images = np.array_equal(numpy_result.frame_image, device_result.frame_image)
     expected, got = numpy_result.tracers, device_result.tracers
