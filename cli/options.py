@@ -64,6 +64,13 @@ device_option = click.option(
     help="OpenCL device: 'pocl', 'nvidia', 'P:D' from 'rimcl devices' "
     "(default: $RIMCL_DEVICE, then a GPU, then a CPU).",
 )
+engine_option = click.option(
+    "--engine",
+    type=click.Choice(["device", "numpy"]),
+    default=None,
+    help="Where tracer images are rendered and located: device (OpenCL, with the trace; "
+    "the default) or numpy (the readable reference) [run.engine].",
+)
 field_option = click.option(
     "--field",
     "field_path",

@@ -11,6 +11,7 @@ from rimcl.cli.options import (
     FiniteFloat,
     case_option,
     device_option,
+    engine_option,
     field_option,
     handle_errors,
     interp_option,
@@ -152,6 +153,7 @@ from rimcl.cli.options import (
     help="Also write the first frame of all tracers as a 16-bit PNG or TIFF.",
 )
 @device_option
+@engine_option
 @seed_option
 @click.option(
     "-o",
@@ -163,7 +165,9 @@ from rimcl.cli.options import (
 )
 @overwrite_option
 @handle_errors
-def render(field_path, case, k_rho, step, frame_image, device_spec, output, overwrite, **options):
+def render(
+    field_path, case, k_rho, step, frame_image, device_spec, engine, output, overwrite, **options
+):
     """Synthetic PTV: trace each tracer's rays, render its image, centroid it, track it;
     compare with a uniform medium and with the true motion.
 
@@ -190,6 +194,7 @@ def render(field_path, case, k_rho, step, frame_image, device_spec, output, over
         step=parse_step(step),
         frame_image=frame_image is not None,
         device=device_spec,
+        **({} if engine is None else {"engine": engine}),
     )
     result = run_render(field_path, case=case, k_rho=k_rho, config=config, progress=True)
     write_render(output, result, overwrite=overwrite)

@@ -10,6 +10,7 @@ from rimcl.cli.options import (
     NON_NEGATIVE,
     POSITIVE,
     device_option,
+    engine_option,
     handle_errors,
 )
 from rimcl.cli.piv import echo_piv_case_lines
@@ -44,12 +45,7 @@ def _case_list(_ctx, _param, value):
     type=click.Choice(["paper"]),
     help="A named scene under SCENE_FILE's keys; paper: the paper's own imaging (README).",
 )
-@click.option(
-    "--engine",
-    type=click.Choice(["numpy", "device"]),
-    help="Where tracer images are rendered and located: numpy (the reference) or device "
-    "(OpenCL, with the trace) [run.engine].",
-)
+@engine_option
 @click.option(
     "--mode",
     type=click.Choice(["ptv", "piv", "both"]),
