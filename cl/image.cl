@@ -11,8 +11,9 @@
  * the counts (scale from the reference pass or from the image's own peak; then the
  * deterministic camera: rint, clip; or, with RIMCL_NOISE, rimcl/sensor.py Sensor.digitize:
  * per pixel the Philox draws of rimcl_philox.h, shot noise, full well, read noise, gain,
- * rint, ADC clip, in the host's order of double operations), the 8-connected components above the threshold (union-find; the root of a component is its
- * smallest pixel index, the order scikit-image numbers them in), the brightest component
+ * rint, ADC clip, in the host's order of double operations), the 8-connected components
+ * above the threshold (union-find; the root of a component is its smallest pixel index,
+ * the order scikit-image numbers them in), the brightest component
  * (by summed centroid weight; ties to the smaller root, as numpy.argmax), and its moments,
  * area, touching of the window edge and perimeter histogram (scikit-image's perimeter with
  * neighborhood=4: border pixels by erosion with the 4-neighbour cross, each scored by
