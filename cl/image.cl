@@ -8,9 +8,12 @@
  * the image (renderer "exact": each ray's Gaussian integrated over the pixels as
  * differences of ndtr, cut `radius` pixels from the ray; "paper": the rays binned to
  * pixels in ray order, then spread with scipy's normalised Gaussian kernel of `radius`),
- * the counts (scale from the reference pass or from the image's own peak, rint, clip), the
- * 8-connected components above the threshold (union-find; the root of a component is its
- * smallest pixel index, the order scikit-image numbers them in), the brightest component
+ * the counts (scale from the reference pass or from the image's own peak; then the
+ * deterministic camera: rint, clip; or, with RIMCL_NOISE, rimcl/sensor.py Sensor.digitize:
+ * per pixel the Philox draws of rimcl_philox.h, shot noise, full well, read noise, gain,
+ * rint, ADC clip, in the host's order of double operations), the 8-connected components
+ * above the threshold (union-find; the root of a component is its smallest pixel index,
+ * the order scikit-image numbers them in), the brightest component
  * (by summed centroid weight; ties to the smaller root, as numpy.argmax), and its moments,
  * area, touching of the window edge and perimeter histogram (scikit-image's perimeter with
  * neighborhood=4: border pixels by erosion with the 4-neighbour cross, each scored by
@@ -19,18 +22,26 @@
  * arithmetic.
  *
  * Required defines: RIMCL_RENDERER (0 exact, 1 paper), RIMCL_CENTROID (0 excess weights,
- *   1 grey weights). Optional: RIMCL_POCL_FAST (rimcl_inline.h).
+ *   1 grey weights). Optional: RIMCL_NOISE (0, default: the deterministic camera; 1: sensor
+ *   noise), RIMCL_POCL_FAST (rimcl_inline.h).
  * Needs cl_khr_fp64.
  * Units: pixels of the camera (pixel i spans [i, i + 1)); light in units of ray weight;
- *   counts of the camera.
+ *   counts of the camera; electrons (e-) of the sensor. Pixel (i, j) of a window is pixel
+ *   (col0 + i, row0 + j) of the renderer's grid (rimcl/render.py: origin and pixel size),
+ *   the global pixel of the noise draws.
  * Axis order: windows and images are (rows, columns) = (x3, x2); points are (x2, x3).
  * Work-item: one scratch slot (get_global_id); it images one tracer after another, taken
  *   from a shared counter, until the batch is done (the rows do not depend on which
  *   work-item imaged a tracer).
  * Global size: the number of slots.
  *
- * consts (doubles): psf sigma (px), threshold (counts), full scale (counts), then the
- *   paper kernel (2 radius + 1 weights).
+ * consts (doubles): psf sigma (px), threshold (counts), full scale (counts), the reference
+ *   peak (counts, full scale; with noise e-, peak_electrons), background (e-), full well
+ *   (e-), read noise (e- rms), gain (e- per count), then the paper kernel (2 radius + 1
+ *   weights). The sensor's entries are unused without noise.
+ * Noise arguments (unused without noise): the key (seed mod 2^32, seed div 2^32), the
+ *   stream 2 frame + pass and the global id of the batch's tracer 0 (tracer t draws with
+ *   tracer0 + t).
  * rows_l (n_tracers x ROW_LONGS longs), rows_d (n_tracers x ROWD_COUNT doubles): one row
  *   per tracer, offsets ROW_* and ROWD_* below.
  * canvas (canvas_height x canvas_width ints, or unused when canvas_width is 0): the
@@ -42,6 +53,7 @@
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
 #include "rimcl_ndtr.h"
+#include "rimcl_philox.h"
 
 #ifndef RIMCL_RENDERER
 #error "RIMCL_RENDERER must be defined (0 exact, 1 paper)"
@@ -49,11 +61,23 @@
 #ifndef RIMCL_CENTROID
 #error "RIMCL_CENTROID must be defined (0 excess, 1 grey)"
 #endif
+#ifndef RIMCL_NOISE
+#define RIMCL_NOISE 0
+#endif
 
 #define IMG_SIGMA 0
 #define IMG_THRESHOLD 1
 #define IMG_FULL_SCALE 2
-#define IMG_KERNEL 3
+#define IMG_PEAK 3 /* the reference image's peak: counts, or with noise e- */
+#define IMG_BACKGROUND 4
+#define IMG_FULL_WELL 5
+#define IMG_READ_NOISE 6
+#define IMG_GAIN 7
+#define IMG_KERNEL 8
+
+/* rimcl/sensor.py POISSON_INVERSION_MAX and POISSON_INVERSION_KMAX */
+#define POISSON_INVERSION_MAX 16.0
+#define POISSON_INVERSION_KMAX 64
 
 #define RAY_OK 0
 #define RAY_STATUS_MASK 7
@@ -87,7 +111,7 @@
 #define ROW_LONGS 30
 
 #define ROWD_PEAK 0 /* brightest pixel before scaling */
-#define ROWD_SCALE 1 /* counts per unit of light used */
+#define ROWD_SCALE 1 /* counts (with noise e-) per unit of light used */
 #define ROWD_LIGHT 2 /* sum of the usable rays' weights */
 #define ROWD_LIGHT_X 3 /* sum of weight x image point, pixels (x2) */
 #define ROWD_LIGHT_Y 4 /* (x3) */
@@ -273,16 +297,64 @@ RIMCL_INLINE void splat(const double2 position, const double weight, const int w
     }
 }
 
+#if RIMCL_NOISE
+/* rimcl/sensor.py _box_muller: a standard normal of two uniforms. */
+RIMCL_INLINE double box_muller(const double u_radius, const double u_angle)
+{
+    return sqrt(-2.0 * log(u_radius)) * cos(2.0 * M_PI * u_angle);
+}
+
+/* The counts of one pixel of `light` (unscaled) with the draws `words` (rimcl/sensor.py
+ * Sensor.digitize and poisson_from_uniforms, the same double operations in the same
+ * order); *saturated is set where the full well is reached or the ADC clips. */
+RIMCL_INLINE double sensor_counts(const double light, const double scale, const uint4 words,
+                                  __constant const double *consts, int *saturated)
+{
+    const double u0 = rimcl_philox_uniform(words.x), u1 = rimcl_philox_uniform(words.y);
+    const double scaled = light * scale;
+    const double mean = ((scaled > 0.0) ? scaled : 0.0) + consts[IMG_BACKGROUND];
+    double electrons;
+    if (mean <= POISSON_INVERSION_MAX) {
+        /* inversion: the cumulative sum never decreases, so the loop is numpy's count */
+        double term = exp(-mean), cumulative = term;
+        int k = 0;
+        while (u0 > cumulative && k < POISSON_INVERSION_KMAX) {
+            k += 1;
+            term = term * (mean / (double)k);
+            cumulative = cumulative + term;
+        }
+        electrons = (double)k;
+    } else {
+        const double rounded = dbl_rint(mean + sqrt(mean) * box_muller(u0, u1));
+        electrons = (rounded > 0.0) ? rounded : 0.0;
+    }
+    const double full_well = consts[IMG_FULL_WELL];
+    *saturated |= electrons >= full_well;
+    electrons = (electrons < full_well) ? electrons : full_well;
+    const double read_noise = consts[IMG_READ_NOISE];
+    if (read_noise > 0.0) {
+        const double z1 = box_muller(rimcl_philox_uniform(words.z), rimcl_philox_uniform(words.w));
+        electrons = electrons + read_noise * z1;
+    }
+    const double counts = dbl_rint(electrons / consts[IMG_GAIN]);
+    const double full_scale = consts[IMG_FULL_SCALE];
+    *saturated |= counts > full_scale;
+    return (counts < 0.0) ? 0.0 : ((counts > full_scale) ? full_scale : counts);
+}
+#endif
+
 /* The window image of tracer t: its rows. */
 RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant const double *consts,
                                const int rays, const int max_window, const int pad,
                                const int radius, const int table_width, const int weights_per_ray,
-                               const int reference, const long threshold_fixed,
+                               const int own_scale, const long threshold_fixed,
                                __global const double2 *ray_pixel_all, __global const int *ray_steps,
                                __global const uchar *ray_code_all, __global const double *weights,
                                __global const double *scales, __global long *row_l,
                                __global double *row_d, __global int *canvas,
-                               const int canvas_width, const int canvas_height)
+                               const int canvas_width, const int canvas_height,
+                               const uint2 noise_key, const uint noise_stream,
+                               const uint noise_tracer0)
 {
     const size_t first = (size_t)t * rays;
     __global const double2 *ray_pixel = ray_pixel_all + first;
@@ -328,7 +400,7 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
     row_l[ROW_VIGNETTED] = vignetted;
     row_l[ROW_STEPS] = steps;
     row_d[ROWD_PEAK] = NAN;
-    row_d[ROWD_SCALE] = reference ? NAN : scales[t];
+    row_d[ROWD_SCALE] = own_scale ? NAN : scales[t];
     row_d[ROWD_LIGHT] = light;
     row_d[ROWD_LIGHT_X] = light_x;
     row_d[ROWD_LIGHT_Y] = light_y;
@@ -399,11 +471,12 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
 #endif
     flags |= (outside > 0) ? FLAG_RAYS_OUTSIDE_WINDOW : 0;
 
-    /* ---- counts (rimcl/render.py scale_for, quantize) ---- */
+    /* ---- counts (rimcl/sensor.py Sensor.scale_for, Sensor.digitize) ---- */
     double peak = -INFINITY;
     for (int p = 0; p < w_px * h_px; ++p)
         peak = fmax(peak, image[p]);
-    const double scale = reference ? ((peak > 0.0) ? full_scale / peak : NAN) : scales[t];
+    const double target = consts[IMG_PEAK];
+    const double scale = own_scale ? ((peak > 0.0) ? target / peak : NAN) : scales[t];
     row_l[ROW_WINDOW] = col0;
     row_l[ROW_WINDOW + 1] = row0;
     row_l[ROW_WINDOW + 2] = width;
@@ -417,11 +490,28 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
     }
     int saturated = 0;
     int ai0 = INT_MAX, ai1 = -1, aj0 = INT_MAX, aj1 = -1;
+#if RIMCL_NOISE
+    const uint noise_tracer = noise_tracer0 + (uint)t;
+    (void)full_scale; /* the sensor's clip reads it from consts */
+#else
+    (void)noise_key;
+    (void)noise_stream;
+    (void)noise_tracer0;
+#endif
     for (int j = 0; j < h_px; ++j) {
         for (int i = 0; i < w_px; ++i) {
+#if RIMCL_NOISE
+            /* the global pixel, wrapped to 32 bits as the host's counters */
+            const uint4 counter =
+                (uint4)((uint)(col0 + i), (uint)(row0 + j), noise_tracer, noise_stream);
+            const double counts = sensor_counts(image[j * w_px + i], scale,
+                                                rimcl_philox4x32_10(counter, noise_key), consts,
+                                                &saturated);
+#else
             double counts = dbl_rint(image[j * w_px + i] * scale);
             saturated |= counts > full_scale;
             counts = (counts < 0.0) ? 0.0 : ((counts > full_scale) ? full_scale : counts);
+#endif
             image[j * w_px + i] = counts;
             if (counts > threshold) {
                 ai0 = min(ai0, i);
@@ -575,7 +665,7 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
 
 __kernel void image_tracers(__constant const double *consts, const int n_tracers, const int rays,
                             const int max_window, const int pad, const int radius,
-                            const int table_width, const int weights_per_ray, const int reference,
+                            const int table_width, const int weights_per_ray, const int own_scale,
                             const long threshold_fixed, __global const double2 *ray_pixel,
                             __global const int *ray_steps, __global const uchar *ray_code,
                             __global const double *weights, __global const double *scales,
@@ -584,7 +674,8 @@ __kernel void image_tracers(__constant const double *consts, const int n_tracers
                             __global double *source_weight_pool, __global double *factor_pool,
                             __global long *rows_l, __global double *rows_d,
                             __global int *canvas, const int canvas_width,
-                            const int canvas_height)
+                            const int canvas_height, const uint seed_low, const uint seed_high,
+                            const uint noise_stream, const uint noise_tracer0)
 {
     const size_t slot = get_global_id(0);
     const size_t window_area = (size_t)max_window * max_window;
@@ -602,8 +693,9 @@ __kernel void image_tracers(__constant const double *consts, const int n_tracers
         if (t >= n_tracers)
             break;
         image_tracer(t, s, consts, rays, max_window, pad, radius, table_width, weights_per_ray,
-                     reference, threshold_fixed, ray_pixel, ray_steps, ray_code, weights, scales,
+                     own_scale, threshold_fixed, ray_pixel, ray_steps, ray_code, weights, scales,
                      rows_l + (size_t)t * ROW_LONGS, rows_d + (size_t)t * ROWD_COUNT, canvas,
-                     canvas_width, canvas_height);
+                     canvas_width, canvas_height, (uint2)(seed_low, seed_high), noise_stream,
+                     noise_tracer0);
     }
 }

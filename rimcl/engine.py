@@ -9,9 +9,10 @@ device and only per-tracer rows (and the small ray sample) come back:
    exit states to the sheet and applies the camera's collection test in float64 as the host
    does, and keeps each ray's image point in pixels;
 2. ``cl/image.cl`` forms each tracer's window, renders it (``exact`` or ``paper``), digitises
-   it, finds the 8-connected components above the threshold and the brightest one, and
-   returns its integer moments, area, edge flag and perimeter histogram, the peak, the
-   light and the light-weighted mean image point.
+   it (the deterministic camera, or the sensor's noise with the host's Philox draws of the
+   same global pixels: :mod:`rimcl.sensor`), finds the 8-connected components above the
+   threshold and the brightest one, and returns its integer moments, area, edge flag and
+   perimeter histogram, the peak, the light and the light-weighted mean image point.
 
 The host turns the rows into the columns of :data:`rimcl.imaging.IMAGE_COLUMNS` with the
 NumPy engine's own arithmetic (centroids are exact integer moments divided once), so where
@@ -44,6 +45,7 @@ from rimcl.centroid import NO_POSITION, TracerFlag
 from rimcl.errors import RimclError
 from rimcl.imaging import empty_columns
 from rimcl.render import TRUNCATE_SIGMAS
+from rimcl.sensor import MEASURED_PASS, REFERENCE_PASS
 from rimcl.trace import (
     _RAY_OUT_STRIDE,
     STATUS_NAMES,
@@ -171,16 +173,21 @@ class DeviceImager:
         # CPUs: a work-group per slot, so that slots spread over the cores; GPUs: many slots
         self.group = 1 if cpu else GPU_GROUP
         context = context_for(device)
+        sensor = imaging.sensor
         defines = {
             "RIMCL_RENDERER": 0 if renderer.kind == "exact" else 1,
             "RIMCL_CENTROID": 0 if imaging.centroid_weights == "excess" else 1,
             "RIMCL_POCL_FAST": int(is_pocl(device)),
         }
+        if sensor.noise:
+            defines["RIMCL_NOISE"] = 1
         self.kernel = get_kernel(build_program(context, "image.cl", defines), "image_tracers")
         rw, ro = cl.mem_flags.READ_WRITE, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
-        consts = np.concatenate(
-            [[sigma, float(imaging.threshold), float(renderer.full_scale)], kernel]
-        ).astype(np.float64)
+        # the reference peak: full scale, or with noise peak_electrons (Sensor.scale_for)
+        self.scale_target = float(sensor.peak_electrons if sensor.noise else renderer.full_scale)
+        camera = [sigma, float(imaging.threshold), float(renderer.full_scale), self.scale_target]
+        electrons = [sensor.background_e, sensor.full_well_e, sensor.read_noise_e, sensor.gain]
+        consts = np.concatenate([camera, electrons, kernel]).astype(np.float64)
         self.consts = cl.Buffer(context, ro, hostbuf=consts)
         area = window * window
         slot_bytes = area * 24 + self.rays * 24 + 16 * self.table_width
@@ -264,7 +271,12 @@ class DeviceImager:
         cl.enqueue_copy(self.queue, out, self.canvas)
         return out
 
-    def enqueue(self, rays, n_tracers, weights, scales=None, canvas=False):
+    @property
+    def own_scale(self):
+        """Whether every image is scaled to its own peak (``per_image`` scaling)."""
+        return self.imaging.scaling == "per_image"
+
+    def enqueue(self, rays, n_tracers, weights, scales=None, canvas=False, noise=None):
         """Image ``n_tracers`` tracers whose rays are in the device buffers ``rays``.
 
         Parameters
@@ -275,9 +287,14 @@ class DeviceImager:
         weights : (pyopencl.Buffer, int)
             From :meth:`set_weights`.
         scales : ndarray, shape (n_tracers,), optional
-            The reference pass's scales; None for the reference pass.
+            The reference pass's scales; None for the reference pass (ignored with
+            ``per_image`` scaling: every image sets its own).
         canvas : bool
             Add the counts into the canvas of :meth:`use_canvas`.
+        noise : (int, int, int), optional
+            ``(pass_id, frame, tracer0)`` of a noisy sensor's draws
+            (:class:`rimcl.sensor.NoiseKey`): tracer ``t`` of the batch draws as the global
+            tracer ``tracer0 + t``.
 
         Returns
         -------
@@ -286,7 +303,9 @@ class DeviceImager:
         """
         import pyopencl as cl
 
-        if scales is not None:
+        own_scale = scales is None or self.own_scale
+        stream, tracer0 = self._noise_words(noise, n_tracers)
+        if not own_scale:
             # non-blocking: the queue keeps the host array until the copy is done
             host = np.ascontiguousarray(scales, dtype=np.float64)
             cl.enqueue_copy(self.queue, self.scales, host, is_blocking=False)
@@ -304,7 +323,7 @@ class DeviceImager:
             np.int32(self.radius),
             np.int32(self.table_width),
             np.int32(per_ray),
-            np.int32(scales is None),
+            np.int32(own_scale),
             np.int64(self.threshold_fixed),
             *rays,
             weight_buffer,
@@ -316,8 +335,26 @@ class DeviceImager:
             canvas_buffer,
             np.int32(width),
             np.int32(height),
+            np.uint32(self.imaging.sensor.seed & 0xFFFFFFFF),
+            np.uint32(self.imaging.sensor.seed >> 32),
+            np.uint32(stream),
+            np.uint32(tracer0),
         )
         return cl.enqueue_nd_range_kernel(self.queue, self.kernel, (self.slots,), (self.group,))
+
+    def _noise_words(self, noise, n_tracers):
+        """The kernel's noise stream ``2 frame + pass`` and first tracer (0, 0 without noise),
+        checked as :func:`rimcl.sensor.pixel_uniforms` checks its key."""
+        if not self.imaging.sensor.noise:
+            return 0, 0
+        if noise is None:
+            raise RimclError("a noisy sensor needs a NoiseKey (pass, frame, tracer) per image")
+        pass_id, frame, tracer0 = (int(v) for v in noise)
+        if pass_id not in (REFERENCE_PASS, MEASURED_PASS) or not 0 <= frame < 1 << 31:
+            raise RimclError(f"bad noise key {noise!r}: pass must be 0 or 1, frame in [0, 2**31)")
+        if not (0 <= tracer0 and tracer0 + n_tracers <= 1 << 32):
+            raise RimclError(f"the tracer ids must be in [0, 2**32), got {tracer0} onwards")
+        return 2 * frame + pass_id, tracer0
 
     def enqueue_read(self, rows_l, rows_d):
         """Non-blocking reads of the rows of the last launch into host arrays."""
@@ -334,7 +371,8 @@ class DeviceImager:
         rows_l : ndarray, int64, shape (B, 30)
         rows_d : ndarray, float64, shape (B, 5)
         scales : ndarray, shape (B,), optional
-            The scales the kernel was given (None: the reference pass).
+            The scales the kernel was given (None: the reference pass; ignored with
+            ``per_image`` scaling).
 
         Returns
         -------
@@ -351,8 +389,9 @@ class DeviceImager:
         with np.errstate(invalid="ignore", divide="ignore"):
             out["x2_opt"] = origin[0] + rows_d[:, _ROWD_LIGHT_X] / light * pixel_size
             out["x3_opt"] = origin[1] + rows_d[:, _ROWD_LIGHT_Y] / light * pixel_size
-            if scales is None:
-                scale = renderer.full_scale / rows_d[:, _ROWD_PEAK]
+            if scales is None or self.own_scale:
+                # Sensor.scale_for: the peak to full scale, or with noise to peak_electrons
+                scale = self.scale_target / rows_d[:, _ROWD_PEAK]
                 scale[~(rows_d[:, _ROWD_PEAK] > 0)] = np.nan
             else:
                 scale = np.asarray(scales, dtype=np.float64).copy()
@@ -421,10 +460,6 @@ class DeviceEngine:
 
         if isinstance(camera, LensCamera):
             return "image through a lens camera (camera.kind = lens)"
-        if imaging.sensor.noise:
-            return "draw sensor noise ([sensor] noise = true)"
-        if imaging.scaling != "reference":
-            return "scale each image to its own peak (renderer.scale = per_image)"
         return None
 
     def __init__(self, camera, scene, imaging, device, batch, first_tracer=0, mie=None):
@@ -563,6 +598,7 @@ class DeviceEngine:
                 weights[ids] if per_tracer_weights else shared,
                 sampler,
                 canvas is not None,
+                (pass_.pass_id, frame, self.first_tracer + int(ids[0])),
             )
             self.queue.flush()
             if pending is not None:
@@ -586,7 +622,9 @@ class DeviceEngine:
             "rows_d": np.empty((self.batch, _ROWD_COUNT), dtype=np.float64),
         }
 
-    def _launch(self, kernel, launch, ids, host, positions, scales, weights, sampler, canvas):
+    def _launch(
+        self, kernel, launch, ids, host, positions, scales, weights, sampler, canvas, noise
+    ):
         import pyopencl as cl
 
         count = len(ids)
@@ -637,7 +675,9 @@ class DeviceEngine:
             weight_arg = weights
         else:
             weight_arg = self.imager.set_weights(weights, count)
-        image_event = self.imager.enqueue(self.ray_buffers, count, weight_arg, scales, canvas)
+        image_event = self.imager.enqueue(
+            self.ray_buffers, count, weight_arg, scales, canvas, noise
+        )
         events += self.imager.enqueue_read(host["rows_l"][:count], host["rows_d"][:count])
         return _Batch(ids, host, events, fan_event, image_event, sample_rays)
 
@@ -696,7 +736,9 @@ class _SparseRays:
         self.status[rows] = result.status
 
 
-def image_points(imaging, points, usable, weights, flags, scales=None, device=None, canvas=None):
+def image_points(
+    imaging, points, usable, weights, flags, scales=None, device=None, canvas=None, noise=None
+):
     """Render, digitise and locate each tracer of a batch on the device.
 
     The device counterpart of :func:`rimcl.imaging.image_batch`, with its parameters and
@@ -713,6 +755,9 @@ def image_points(imaging, points, usable, weights, flags, scales=None, device=No
     scales : ndarray, shape (B,), optional
     device : str or pyopencl.Device, optional
     canvas : rimcl.render.FrameImage, optional
+    noise : (int, int, ndarray), optional
+        ``(pass_id, frame, tracer_ids)`` as :func:`rimcl.imaging.image_batch`; the kernel
+        numbers tracers from the first id, so ``tracer_ids`` must be consecutive.
 
     Returns
     -------
@@ -724,6 +769,12 @@ def image_points(imaging, points, usable, weights, flags, scales=None, device=No
 
     device = select_device(device)
     count, rays = usable.shape
+    first_id = None
+    if noise is not None:
+        ids = np.asarray(noise[2], dtype=np.int64).reshape(-1)
+        if len(ids) != count or (count and np.any(ids != ids[0] + np.arange(count))):
+            raise RimclError("the device engine draws noise for consecutive tracer ids only")
+        first_id = int(ids[0]) if count else 0
     queue = _profiling_queue(device)
     imager = DeviceImager(imaging, rays, count, device, queue)
     pixels = imaging.renderer.to_pixels(points.reshape(-1, 2))
@@ -739,7 +790,9 @@ def image_points(imaging, points, usable, weights, flags, scales=None, device=No
     )
     if canvas is not None:
         imager.use_canvas(canvas.counts.shape)
-    imager.enqueue(buffers, count, imager.set_weights(weights, count), scales, canvas is not None)
+    key = None if noise is None else (noise[0], noise[1], first_id)
+    weight_arg = imager.set_weights(weights, count)
+    imager.enqueue(buffers, count, weight_arg, scales, canvas is not None, key)
     rows_l = np.empty((count, _ROW_LONGS), dtype=np.int64)
     rows_d = np.empty((count, _ROWD_COUNT), dtype=np.float64)
     cl.wait_for_events(imager.enqueue_read(rows_l, rows_d))

@@ -79,6 +79,10 @@ DEFINE_SETS = {
         [
             *_product(RIMCL_RENDERER=(0, 1), RIMCL_CENTROID=(0, 1)),
             *_product(RIMCL_RENDERER=(0, 1), RIMCL_CENTROID=(0,), RIMCL_POCL_FAST=(1,)),
+            *_product(RIMCL_RENDERER=(0, 1), RIMCL_CENTROID=(0,), RIMCL_NOISE=(1,)),
+            *_product(
+                RIMCL_RENDERER=(0,), RIMCL_CENTROID=(1,), RIMCL_NOISE=(1,), RIMCL_POCL_FAST=(1,)
+            ),
         ],
     ),
 }

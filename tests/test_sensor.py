@@ -1,7 +1,6 @@
 """The camera sensor (rimcl.sensor): counter-based draws, Poisson sampling, noise scaling."""
 
 import dataclasses
-import os
 
 import numpy as np
 import pytest
@@ -39,38 +38,58 @@ def test_philox_known_answers(counter, key, expected):
     assert tuple(int(w) for w in philox4x32(counter, key)) == expected
 
 
-def test_philox_matches_random123_on_the_opencl_device(device):
+def test_philox_header_matches_the_host_on_the_opencl_device(device, has_fp64):
+    """cl/rimcl_philox.h (the sensor noise of cl/image.cl) draws the host's words."""
     import pyopencl as cl
     import pyopencl.array as cl_array
 
+    from rimcl.program import kernel_dir
+
     source = r"""
-    #include <pyopencl-random123/philox.cl>
-    __kernel void draw(__global uint *out, uint row, uint tracer, uint k0, uint k1) {
-        uint column = get_global_id(0);
-        philox4x32_ctr_t counter = {{column, row, tracer, 2u * 5u + 1u}};
-        philox4x32_key_t key = {{k0, k1}};
-        philox4x32_ctr_t words = philox4x32(counter, key);
-        for (int j = 0; j < 4; ++j) out[4 * column + j] = words.v[j];
+    #if HAS_FP64
+    #pragma OPENCL EXTENSION cl_khr_fp64 : enable
+    #endif
+    #include "rimcl_philox.h"
+    __kernel void draw(__global uint *out, __global double *uniform, uint column0, uint row,
+                       uint tracer, uint stream, uint k0, uint k1) {
+        const uint i = get_global_id(0);
+        const uint4 words =
+            rimcl_philox4x32_10((uint4)(column0 + i, row, tracer, stream), (uint2)(k0, k1));
+        vstore4(words, i, out);
+    #if HAS_FP64
+        const double4 u = (double4)(rimcl_philox_uniform(words.x), rimcl_philox_uniform(words.y),
+                                    rimcl_philox_uniform(words.z), rimcl_philox_uniform(words.w));
+        vstore4(u, i, uniform);
+    #endif
     }"""
     context = cl.Context([device])
     queue = cl.CommandQueue(context)
-    include = os.path.join(os.path.dirname(cl.__file__), "cl")
-    program = cl.Program(context, source).build(options=[f"-I{include}"])
-    width, row, tracer, seed = 257, 9, 42, (7 << 32) + 123
+    options = [f"-I{kernel_dir()}", f"-DHAS_FP64={int(has_fp64)}"]
+    kernel = cl.Program(context, source).build(options=options).draw
+    width = 257
     out = cl_array.empty(queue, 4 * width, np.uint32)
-    program.draw(
-        queue,
-        (width,),
-        None,
-        out.data,
-        np.uint32(row),
-        np.uint32(tracer),
-        np.uint32(seed & 0xFFFFFFFF),
-        np.uint32(seed >> 32),
-    )
-    on_device = out.get().reshape(width, 4).T
-    uniforms = pixel_uniforms(seed, NoiseKey(MEASURED_PASS, 5, tracer), row, np.arange(width))
-    np.testing.assert_array_equal((on_device + 0.5) * 2.0**-32, uniforms)
+    uniform = cl_array.zeros(queue, 4 * width, np.float64)
+
+    def draw(count, column0, row, tracer, stream, seed):
+        words = (column0, row, tracer, stream, seed & 0xFFFFFFFF, seed >> 32)
+        args = [np.uint32(w) for w in words]
+        kernel(queue, (count,), None, out.data, uniform.data, *args)
+        shape = (count, 4)
+        return out.get()[: 4 * count].reshape(shape).T, uniform.get()[: 4 * count].reshape(shape).T
+
+    # Random123's known answers (kat_vectors, philox4x32 10 rounds)
+    words, _ = draw(1, 0, 0, 0, 0, 0)
+    assert tuple(int(w) for w in words[:, 0]) == (0x6627E8D5, 0xE169C58D, 0xBC57AC4C, 0x9B00DBD8)
+    words, _ = draw(1, *(4 * [0xFFFFFFFF]), (1 << 64) - 1)
+    assert tuple(int(w) for w in words[:, 0]) == (0x408F276D, 0x41C83B0E, 0xA20BC7C6, 0x6D5451FD)
+    # the sensor's counters: pixels of a row (wrapping at 2^32), tracer, 2 frame + pass
+    row, tracer, seed = 9, 42, (7 << 32) + 123
+    words, uniforms_on_device = draw(width, 2**32 - 100, row, tracer, 2 * 5 + 1, seed)
+    columns = np.arange(-100, width - 100)
+    uniforms = pixel_uniforms(seed, NoiseKey(MEASURED_PASS, 5, tracer), row, columns)
+    np.testing.assert_array_equal((words + 0.5) * 2.0**-32, uniforms)
+    if has_fp64:
+        np.testing.assert_array_equal(uniforms_on_device, uniforms)
 
 
 def test_inversion_is_the_exact_poisson_quantile():
