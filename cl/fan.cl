@@ -54,7 +54,7 @@
 #define CAM_PUPIL_CENTRE 7
 #define CAM_PUPIL_RADIUS 10
 /* lens behind a window (RIMCL_CAMERA 2), as rimcl/camera.py LensCamera computes them: */
-#define CAM_WINDOW_DEPTHS 11 /* x1 runs in fluid, glass, outside up to the pupil */
+#define CAM_WINDOW_DEPTHS 11 /* x1 runs in fluid, glass (the thickness), outside to the pupil */
 #define CAM_WINDOW_RATIOS 14 /* sine ratios 1, n_fluid / n_glass, n_fluid / n_outside */
 #define CAM_WINDOW_SLOPES 17 /* depths * ratios, per medium */
 #define CAM_WINDOW_TOTAL 20 /* their sum: the paraxial run per unit sine */
@@ -76,8 +76,8 @@ RIMCL_INLINE double norm3(double a, double b, double c)
 #if RIMCL_CAMERA == 2
 /* The unit direction from the tracer (x2, x3) = start to the pupil point `aim` through the
  * fluid, the glass and the outside medium, as LensCamera.directions solves it (Newton on
- * the sine of the angle to x1, from the paraxial guess, its operations in its order);
- * normalised once more, as trace_rays does. */
+ * the sine of the angle to x1, from the paraxial guess, its operations in its order),
+ * then normalised as trace_rays does. */
 RIMCL_INLINE void window_direction(__constant const double *camera, const double start2,
                                    const double start3, __global const double *aim, double *d)
 {
