@@ -4,28 +4,37 @@
  * The device engine's first stage (DESIGN §14). Ray g of the batch belongs to tracer
  * g / K and aims at the camera's aim point g % K (K rays per tracer). Each ray is made
  * from float64 tracer and aim positions exactly as rimcl.camera and rimcl.trace_rays make
- * it on the host (difference, two normalisations, float (hi, lo) pairs), so the trace sees
- * the same input bits; it is traced by trace_lanes() (rimcl_trace.h); its exit state is
- * back-projected to the sheet and tested against the camera in float64 with the host's
- * operations (rimcl/trace.py _finish, rimcl/camera.py collected, rimcl/render.py
- * to_pixels), so its image point in pixels is the one the NumPy engine images.
+ * it on the host (difference, two normalisations, float (hi, lo) pairs; behind a window
+ * LensCamera.directions' Newton solve, then one normalisation), so the trace sees the same
+ * input bits; it is traced by trace_lanes() (rimcl_trace.h); its exit state is refracted
+ * by the window (if any), back-projected to the plane the camera images and tested
+ * against the camera in float64 with the host's operations (rimcl/trace.py _finish,
+ * rimcl/camera.py collected, through_window, image_points, rimcl/render.py to_pixels),
+ * so its image point in pixels is the one the NumPy engine images.
  *
  * Required defines: those of trace.cl (RIMCL_PRECISION, RIMCL_FIELD, RIMCL_INTERP,
  *   RIMCL_PERIODIC; optional RIMCL_LANES, RIMCL_POCL_FAST, RIMCL_ADAPTIVE) and
  *   RIMCL_CAMERA: 0 plane camera (every ray that reaches the exit plane is collected),
- *   1 pupil camera (a ray is collected if its straight continuation passes the pupil).
+ *   1 pupil camera (a ray is collected if its straight continuation passes the pupil;
+ *     also a lens camera without a window: its pupil on the x1 axis, its image points
+ *     back-projected onto the sheet, which is its focus plane),
+ *   2 lens camera behind a flat window (rimcl.camera.LensCamera with a FlatWindow):
+ *     directions solved to reach the pupil points through fluid, glass and outside
+ *     medium; exit rays refracted at both window faces, tested against the pupil and
+ *     back-projected onto the focus plane x1 = focus_x1.
  * Optional: RIMCL_MIE (rimcl_mie.h): 0 (default) every ray weighs 1 and ray_weight is not
  *   written; otherwise each ray's Mie weight from its initial direction goes to ray_weight.
  * Needs cl_khr_fp64.
  * Units: lengths in field units; image points in pixels of the camera (pixel i spans
- *   [i, i + 1) from the image origin).
+ *   [i, i + 1) from the image origin); refractive indices as ratios (dimensionless).
  * Axis order: 3-vectors are (x1, x2, x3); tracers and image points are (x2, x3).
- * Work-item: RIMCL_LANES consecutive rays of the batch (as trace.cl).
- * Global size: ceil(n_rays / RIMCL_LANES) (extra items return).
+ * Kernels: trace_fan (the stage); fan_directions (each ray's initial direction, for tests).
+ * Work-item: RIMCL_LANES consecutive rays of the batch (as trace.cl); fan_directions: one.
+ * Global size: ceil(n_rays / RIMCL_LANES) (extra items return); fan_directions: n_rays.
  *
  * tracers (B x 2 doubles): tracer positions (x2, x3) on the sheet.
- * aims    (K x 3 doubles): the camera's aim points (x1, x2, x3).
- * camera  (CAM_COUNT doubles, offsets CAM_* below).
+ * aims    (K x 3 doubles): the camera's aim points (x1, x2, x3) (a lens: its pupil's).
+ * camera  (CAM_COUNT doubles, offsets CAM_* below; the CAM_WINDOW_* ones only for 2).
  * ray_pixel (n_rays double2): image point (x2, x3) in pixels; NaN unless collected.
  * ray_steps (n_rays int): steps taken.
  * ray_code  (n_rays uchar): status (RAY_*, bits 0-2) | RAY_COLLECTED.
@@ -40,7 +49,7 @@
 #include "rimcl_trace.h"
 
 #ifndef RIMCL_CAMERA
-#error "RIMCL_CAMERA must be defined (0 plane, 1 pupil)"
+#error "RIMCL_CAMERA must be defined (0 plane, 1 pupil, 2 lens behind a window)"
 #endif
 
 #define CAM_X_SHEET 0 /* the sheet x1 = x_sheet */
@@ -49,7 +58,17 @@
 #define CAM_PUPIL_AXIS 4 /* unit viewing axis (x1, x2, x3) */
 #define CAM_PUPIL_CENTRE 7
 #define CAM_PUPIL_RADIUS 10
-#define CAM_COUNT 11
+/* lens behind a window (RIMCL_CAMERA 2), as rimcl/camera.py LensCamera computes them: */
+#define CAM_WINDOW_DEPTHS 11 /* x1 runs in fluid, glass (the thickness), outside to the pupil */
+#define CAM_WINDOW_RATIOS 14 /* sine ratios 1, n_fluid / n_glass, n_fluid / n_outside */
+#define CAM_WINDOW_SLOPES 17 /* depths * ratios, per medium */
+#define CAM_WINDOW_TOTAL 20 /* their sum: the paraxial run per unit sine */
+#define CAM_WINDOW_CAP 21 /* 0.999 / max(ratios): the largest starting sine */
+#define CAM_FOCUS_X1 22 /* the plane the lens is focused on */
+#define CAM_COUNT 23
+
+/* Newton steps of LensCamera.directions */
+#define LENS_NEWTON_STEPS 50
 
 #define RAY_COLLECTED 8
 
@@ -57,6 +76,93 @@
 RIMCL_INLINE double norm3(double a, double b, double c)
 {
     return sqrt((a * a + b * b) + c * c);
+}
+
+#if RIMCL_CAMERA == 2
+/* The unit direction from the tracer (x2, x3) = start to the pupil point `aim` through the
+ * fluid, the glass and the outside medium, as LensCamera.directions solves it (Newton on
+ * the sine of the angle to x1, from the paraxial guess, its operations in its order),
+ * then normalised as trace_rays does. */
+RIMCL_INLINE void window_direction(__constant const double *camera, const double start2,
+                                   const double start3, __global const double *aim, double *d)
+{
+    __constant const double *depths = camera + CAM_WINDOW_DEPTHS;
+    __constant const double *ratios = camera + CAM_WINDOW_RATIOS;
+    __constant const double *slopes = camera + CAM_WINDOW_SLOPES;
+    const double lateral2 = aim[1] - start2;
+    const double lateral3 = aim[2] - start3;
+    const double reach = sqrt(lateral2 * lateral2 + lateral3 * lateral3);
+    const double guess = reach / camera[CAM_WINDOW_TOTAL];
+    const double cap = camera[CAM_WINDOW_CAP];
+    double sine = (guess < cap) ? guess : cap;
+    for (int step = 0; step < LENS_NEWTON_STEPS; ++step) {
+        double run = 0.0, slope = 0.0;
+        for (int m = 0; m < 3; ++m) {
+            const double s = sine * ratios[m];
+            const double cosine = sqrt(1.0 - s * s);
+            const double term = depths[m] * s / cosine;
+            const double rate = slopes[m] / (cosine * cosine * cosine);
+            run = (m == 0) ? term : run + term;
+            slope = (m == 0) ? rate : slope + rate;
+        }
+        sine = sine - (run - reach) / slope;
+    }
+    const double unit2 = (reach > 0.0) ? lateral2 / reach : 0.0;
+    const double unit3 = (reach > 0.0) ? lateral3 / reach : 0.0;
+    d[0] = sqrt(1.0 - sine * sine);
+    d[1] = sine * unit2;
+    d[2] = sine * unit3;
+}
+
+/* Snell at a plane of normal x1 into a medium of n_in / n_out = ratio, as rimcl.camera
+ * _refract: the tangential part scaled, the normal one from it; NaN if reflected. */
+RIMCL_INLINE void refract_x1(const double *dir, const double ratio, double *out)
+{
+    const double t2 = dir[1] * ratio;
+    const double t3 = dir[2] * ratio;
+    const double normal = sqrt(1.0 - (t2 * t2 + t3 * t3));
+    out[0] = normal;
+    out[1] = isnan(normal) ? NAN : t2;
+    out[2] = isnan(normal) ? NAN : t3;
+}
+
+/* The exit ray after the window, as LensCamera.through_window: its point on the outer
+ * face (`pos`) and its unit direction outside (`dir`), NaN if reflected totally. */
+RIMCL_INLINE void through_window(__constant const double *camera, double *pos, double *dir)
+{
+    double glass[3], outside[3];
+    refract_x1(dir, camera[CAM_WINDOW_RATIOS + 1], glass);
+    refract_x1(dir, camera[CAM_WINDOW_RATIOS + 2], outside);
+    const double run = camera[CAM_WINDOW_DEPTHS + 1] / glass[0];
+    for (int q = 0; q < 3; ++q) {
+        pos[q] = pos[q] + run * glass[q];
+        dir[q] = outside[q];
+    }
+}
+#endif
+
+/* The camera's unit initial direction from `start` (x1, x2, x3) towards the aim point
+ * `aim`, as its directions() makes it on the host. */
+RIMCL_INLINE void camera_direction(__constant const double *camera, const double *start,
+                                   __global const double *aim, double *d)
+{
+#if RIMCL_CAMERA == 2
+    window_direction(camera, start[1], start[2], aim, d);
+#else
+    for (int q = 0; q < 3; ++q)
+        d[q] = aim[q] - start[q];
+    const double length = norm3(d[0], d[1], d[2]);
+    for (int q = 0; q < 3; ++q)
+        d[q] = d[q] / length;
+#endif
+}
+
+/* trace_rays normalises the directions it is given once more */
+RIMCL_INLINE void normalise3(double *d)
+{
+    const double length = norm3(d[0], d[1], d[2]);
+    for (int q = 0; q < 3; ++q)
+        d[q] = d[q] / length;
 }
 
 /* Where in the batch's sample ray `ray` goes, or -1 (binary search of sample_rays). */
@@ -98,19 +204,16 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
         const int tracer = ray / rays_per_tracer;
         __global const double *aim = aims + 3 * (ray - tracer * rays_per_tracer);
         const double start[3] = {x_sheet, tracers[2 * tracer], tracers[2 * tracer + 1]};
-        double d[3] = {aim[0] - start[0], aim[1] - start[1], aim[2] - start[2]};
-        double length = norm3(d[0], d[1], d[2]);
-        for (int q = 0; q < 3; ++q)
-            d[q] = d[q] / length;
+        double d[3];
+        camera_direction(camera, start, aim, d);
 #if RIMCL_MIE
-        /* the host weighs the camera's unit directions, before trace_rays normalises again */
+        /* the host weighs the camera's directions, before trace_rays normalises again */
         if (first + k < n_rays)
             ray_weight[ray] = mie_weight(mie, mie_terms, d);
 #endif
-        length = norm3(d[0], d[1], d[2]);
+        normalise3(d);
         float o_hi[3], o_lo[3], d_hi[3], d_lo[3];
         for (int q = 0; q < 3; ++q) {
-            d[q] = d[q] / length;
             o_hi[q] = (float)start[q];
             o_lo[q] = (float)(start[q] - (double)o_hi[q]);
             d_hi[q] = (float)d[q];
@@ -157,11 +260,18 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
         double dir[3];
         for (int q = 0; q < 3; ++q)
             dir[q] = tangent[q] / length;
+#if RIMCL_CAMERA == 2
+        /* through the window; back-projection onto the focus plane (LensCamera.image_points) */
+        through_window(camera, end, dir);
+        const double focus_x1 = camera[CAM_FOCUS_X1];
+#else
         /* back-projection to the sheet (the ideal lens focused on it) */
-        const double distance = (end[0] - x_sheet) / dir[0];
+        const double focus_x1 = x_sheet;
+#endif
+        const double distance = (end[0] - focus_x1) / dir[0];
         const double image2 = end[1] - distance * dir[1];
         const double image3 = end[2] - distance * dir[2];
-#if RIMCL_CAMERA == 1
+#if RIMCL_CAMERA >= 1
         __constant const double *axis = camera + CAM_PUPIL_AXIS;
         __constant const double *centre = camera + CAM_PUPIL_CENTRE;
         const double towards = (dir[0] * axis[0] + dir[1] * axis[1]) + dir[2] * axis[2];
@@ -194,4 +304,22 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
             }
         }
     }
+}
+
+/* The initial direction of each ray of the batch, as trace_fan makes it (for tests):
+ * directions (n_rays x 3 doubles). One ray per work-item; global size >= n_rays. */
+__kernel void fan_directions(__global const double *tracers, __global const double *aims,
+                             __constant const double *camera, const int rays_per_tracer,
+                             const int n_rays, __global double *directions)
+{
+    const int ray = get_global_id(0);
+    if (ray >= n_rays)
+        return;
+    const int tracer = ray / rays_per_tracer;
+    const double start[3] = {camera[CAM_X_SHEET], tracers[2 * tracer], tracers[2 * tracer + 1]};
+    double d[3];
+    camera_direction(camera, start, aims + 3 * (ray - tracer * rays_per_tracer), d);
+    normalise3(d);
+    for (int q = 0; q < 3; ++q)
+        directions[3 * ray + q] = d[q];
 }

@@ -638,7 +638,8 @@ class LensCamera:
             s = sine[..., None] * ratios
             cosine = np.sqrt(1.0 - s**2)
             run = np.sum(depths * s / cosine, axis=-1)
-            slope = np.sum(depths * ratios / cosine**3, axis=-1)
+            # c·c·c, not c**3: a pow whose last bit depends on the CPU (SIMD or libm)
+            slope = np.sum(depths * ratios / (cosine * cosine * cosine), axis=-1)
             sine = sine - (run - reach) / slope
         unit = np.divide(
             lateral, reach[..., None], out=np.zeros_like(lateral), where=reach[..., None] > 0

@@ -5,9 +5,11 @@ device and only per-tracer rows (and the small ray sample) come back:
 
 1. ``cl/fan.cl`` makes each tracer's camera rays from the float64 tracer and aim positions
    with the host's operations (so the trace sees the same input bits as
-   :func:`rimcl.trace_rays`), traces them (the kernel of ``cl/trace.cl``), back-projects the
-   exit states to the sheet and applies the camera's collection test in float64 as the host
-   does, and keeps each ray's image point in pixels;
+   :func:`rimcl.trace_rays`; a lens camera behind a window solves its directions as
+   :meth:`rimcl.camera.LensCamera.directions` does), traces them (the kernel of
+   ``cl/trace.cl``), refracts the exit states through the window (if any), back-projects
+   them to the sheet (a lens: to its focus plane) and applies the camera's collection
+   test in float64 as the host does, and keeps each ray's image point in pixels;
 2. ``cl/image.cl`` forms each tracer's window, renders it (``exact`` or ``paper``), digitises
    it (the deterministic camera, or the sensor's noise with the host's Philox draws of the
    same global pixels: :mod:`rimcl.sensor`), finds the 8-connected components above the
@@ -40,7 +42,7 @@ import time
 
 import numpy as np
 
-from rimcl.camera import PupilCamera
+from rimcl.camera import LensCamera, PupilCamera
 from rimcl.centroid import NO_POSITION, TracerFlag
 from rimcl.errors import RimclError
 from rimcl.imaging import empty_columns
@@ -70,7 +72,7 @@ _ROWD_PEAK, _ROWD_SCALE, _ROWD_LIGHT, _ROWD_LIGHT_X, _ROWD_LIGHT_Y, _ROWD_COUNT 
 PERIMETER_SCORES = (5, 7, 13, 15, 17, 21, 23, 25, 27, 33)
 
 _RAY_COLLECTED = 8  # ray code bit of cl/fan.cl
-_CAM_COUNT = 11  # camera block of cl/fan.cl
+_CAM_COUNT = 23  # camera block of cl/fan.cl (CAM_* there)
 #: Tracer images in flight per CPU core (slots taken from a shared counter: balanced).
 CPU_SLOTS_PER_CORE = 4
 #: Tracer images in flight per GPU multiprocessor (one work-item each).
@@ -445,22 +447,13 @@ class DeviceEngine:
 
     Parameters
     ----------
-    camera : PlaneCamera or PupilCamera
+    camera : PlaneCamera, PupilCamera or LensCamera
     scene : rimcl.camera.Scene
     imaging : rimcl.imaging.Imaging
     device : pyopencl.Device
     batch : int
         Tracers per batch (raised on GPUs to fill the image slots: :class:`DeviceImager`).
     """
-
-    @staticmethod
-    def unsupported(camera, imaging):
-        """What of a configuration this engine cannot do yet (None: it can do all of it)."""
-        from rimcl.camera import LensCamera
-
-        if isinstance(camera, LensCamera):
-            return "image through a lens camera (camera.kind = lens)"
-        return None
 
     def __init__(self, camera, scene, imaging, device, batch, first_tracer=0, mie=None):
         import pyopencl as cl
@@ -501,19 +494,52 @@ class DeviceEngine:
         # two sets: the host fills one while the device works from the other
         self.host_sets = [self._host_arrays(), self._host_arrays()]
 
+    def _camera_kind(self):
+        """``RIMCL_CAMERA`` of ``cl/fan.cl``: 0 plane, 1 pupil (and a lens without a
+        window: its pupil, imaging onto the sheet), 2 lens behind a window."""
+        camera = self.camera
+        if isinstance(camera, LensCamera):
+            return 1 if camera.window is None else 2
+        return int(isinstance(camera, PupilCamera))
+
     def _camera_block(self):
+        """The ``camera`` argument of ``cl/fan.cl`` (offsets ``CAM_*`` there), with the
+        host's own float64 values of every constant the camera's methods use."""
         block = np.zeros(_CAM_COUNT, dtype=np.float64)
         block[0] = self.scene.x_sheet
         block[1:3] = self.imaging.renderer.origin
         block[3] = self.imaging.renderer.pixel_size
-        if isinstance(self.camera, PupilCamera):
-            block[4:7] = self.camera.axis
-            block[7:10] = self.camera.centre
-            block[10] = 0.5 * self.camera.diameter
+        camera = self.camera
+        pupil = camera.pupil if isinstance(camera, LensCamera) else camera
+        if isinstance(pupil, PupilCamera):
+            block[4:7] = pupil.axis
+            block[7:10] = pupil.centre
+            block[10] = 0.5 * pupil.diameter
+        if self._camera_kind() == 2:
+            # as LensCamera.directions, through_window and image_points compute them
+            window, aims = camera.window, camera.aim_points()
+            thickness = camera._thickness
+            depths = np.array(
+                [camera.scene.depth, thickness, aims[0, 0] - camera.scene.x_end - thickness]
+            )
+            ratios = np.array(
+                [
+                    1.0,
+                    camera.fluid_index / window.glass_index,
+                    camera.fluid_index / window.outside_index,
+                ]
+            )
+            block[11:14] = depths
+            block[14:17] = ratios
+            block[17:20] = depths * ratios
+            block[20] = np.sum(depths * ratios)
+            block[21] = 0.999 / ratios.max()
+            block[22] = camera.focus_x1
         return block
 
-    def _fan(self, field, trace_options, positions):
-        """The fan kernel and its trace arguments for this field and settings."""
+    def _fan(self, field, trace_options, positions, name="trace_fan"):
+        """The fan kernel (``name`` of ``cl/fan.cl``) and its trace arguments for this field
+        and settings."""
         from rimcl.device import context_for
         from rimcl.program import build_program, get_kernel
 
@@ -537,11 +563,50 @@ class DeviceEngine:
         )
         defines = {
             **launch.defines,
-            "RIMCL_CAMERA": int(isinstance(self.camera, PupilCamera)),
+            "RIMCL_CAMERA": self._camera_kind(),
             "RIMCL_MIE": self.mie_mode,
         }
-        kernel = get_kernel(build_program(context_for(device), "fan.cl", defines), "trace_fan")
+        kernel = get_kernel(build_program(context_for(device), "fan.cl", defines), name)
         return kernel, launch, plan
+
+    def initial_directions(self, field, trace_options, positions):
+        """The initial directions the fan kernel traces from each tracer (made on the
+        device, as the host's ``camera.directions`` and ``trace_rays`` make them).
+
+        Parameters
+        ----------
+        field : rimcl.Field
+        trace_options : dict
+            ``step``, ``interp`` and ``precision``, as a measurement's.
+        positions : ndarray, shape (N, 2)
+            Tracer positions ``(x2, x3)``; at most one batch.
+
+        Returns
+        -------
+        ndarray, float64, shape (N, K, 3)
+        """
+        import pyopencl as cl
+
+        positions = np.ascontiguousarray(positions, dtype=np.float64)
+        if not 0 < len(positions) <= self.batch:
+            raise RimclError(f"give 1 to {self.batch} tracers, got {len(positions)}")
+        kernel, _, _ = self._fan(field, trace_options, positions, "fan_directions")
+        n_rays = len(positions) * self.rays
+        out = np.empty((len(positions), self.rays, 3), dtype=np.float64)
+        directions = cl.Buffer(self.queue.context, cl.mem_flags.WRITE_ONLY, size=out.nbytes)
+        cl.enqueue_copy(self.queue, self.tracers, positions)
+        kernel.set_args(
+            self.tracers,
+            self.aims,
+            self.camera_block,
+            np.int32(self.rays),
+            np.int32(n_rays),
+            directions,
+        )
+        items = -(-n_rays // FAN_GROUP) * FAN_GROUP
+        cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), (FAN_GROUP,))
+        cl.enqueue_copy(self.queue, out, directions)
+        return out
 
     def _fan_shape(self):
         """Rays per work-item of the fan kernel: :data:`FAN_CPU_LANES` on CPUs."""

@@ -434,9 +434,6 @@ def _setup(source, source_name, case_index, config, streams, shard):
     if config.run.engine == "device":
         from rimcl.engine import DeviceEngine
 
-        reason = DeviceEngine.unsupported(camera, imaging)
-        if reason:
-            raise RimclError(f"the device engine does not yet {reason}; use engine numpy")
         setup.engine = DeviceEngine(
             camera, scene, imaging, device, setup.batch, first_tracer=setup.first_tracer, mie=mie
         )

@@ -55,17 +55,18 @@ DEFINE_SETS = {
             ),
         ],
     ),
-    # the device engine: camera fans (plane, pupil) in both kernel shapes; image kernels
+    # the device engine: camera fans (plane, pupil, lens behind a window) in both kernel
+    # shapes; image kernels
     "fan.cl": (
-        ("trace_fan",),
+        ("trace_fan", "fan_directions"),
         [
-            *_product(RIMCL_PRECISION=(0, 1, 2), RIMCL_FIELD=(0,), RIMCL_CAMERA=(0, 1)),
+            *_product(RIMCL_PRECISION=(0, 1, 2), RIMCL_FIELD=(0,), RIMCL_CAMERA=(0, 1, 2)),
             *_product(
                 RIMCL_PRECISION=(1,),
                 RIMCL_FIELD=(0,),
                 RIMCL_INTERP=(0, 1, 2),
                 RIMCL_PERIODIC=(0, 1),
-                RIMCL_CAMERA=(0, 1),
+                RIMCL_CAMERA=(0, 1, 2),
                 RIMCL_LANES=(16,),
                 RIMCL_POCL_FAST=(1,),
             ),
