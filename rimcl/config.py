@@ -378,7 +378,7 @@ class RunConfig:
     """
 
     device: object = None
-    engine: str = "numpy"
+    engine: str = "device"
     rays_per_batch: int = DEFAULT_RAYS_PER_BATCH
     ray_sample: int = DEFAULT_RAY_SAMPLE
     frame_image: bool = False

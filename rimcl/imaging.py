@@ -211,7 +211,7 @@ def image_batch(
                 blob = locate(counts, imaging.threshold, imaging.centroid_weights)
                 timings["render"] += middle - start
                 timings["centroid"] += time.perf_counter() - middle
-                if canvas is not None:
+                if canvas is not None and np.isfinite(scale):  # NaN: a window without light
                     canvas.add(window, counts)
             tracer_flags |= blob.flags
             if saturated:

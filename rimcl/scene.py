@@ -564,11 +564,11 @@ def _keys():
         SceneKey(
             "run",
             "engine",
-            "numpy",
+            "device",
             "str",
-            "where tracer images are rendered and located: numpy (the reference engine) or "
-            "device (rays, images and centroids on the OpenCL device; not yet with a lens "
-            "camera, sensor noise, per-image scaling or Mie weights)",
+            "where tracer images are rendered and located: device (rays, images and "
+            "centroids on the OpenCL device; needs fp64) or numpy (the readable reference "
+            "engine, tracer by tracer)",
             choices=choice["engine"],
         ),
         SceneKey(
