@@ -30,11 +30,11 @@ except ImportError:  # optional: only the benchmark and its tests need it
     prange = range
 
 
-def _jit(**options):
+def _jit(cache=True, **options):
     """numba.njit with an on-disk cache (the first compile takes ~20 s), or nothing."""
     if numba is None:
         return lambda function: function
-    return numba.njit(cache=True, **options)
+    return numba.njit(cache=cache, **options)
 
 
 @_jit(inline="always")
@@ -157,7 +157,9 @@ def _trace(nodes, origin, inv_h, n_ref, periodic, box_lo, box_hi, r0, d0, x_end,
 
 
 _trace_parallel = _jit(parallel=True)(_trace)
-_trace_serial = _jit()(_trace)
+# not cached: numba's disk cache keys a function by its name and signature, not by
+# `parallel`, so a cached serial build of _trace was loaded as the parallel one
+_trace_serial = _jit(cache=False)(_trace)
 
 
 def trace_rays_numba(
