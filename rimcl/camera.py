@@ -166,6 +166,14 @@ def _unit(vectors):
     return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
 
 
+def _toward(aims, starts, aim_index):
+    """Unit vectors from ``starts`` (N, 3) to every aim (N, K, 3), or from start i to
+    ``aims[aim_index[i]]`` (N, 3): the same operations on each pair."""
+    if aim_index is None:
+        return _unit(aims[None, :, :] - starts[:, None, :])
+    return _unit(aims[np.asarray(aim_index)] - starts)
+
+
 @dataclasses.dataclass(frozen=True)
 class PlaneCamera:
     """The paper's camera: from each tracer, rays aimed at an ``M x M`` grid on the exit plane.
@@ -201,20 +209,21 @@ class PlaneCamera:
         x1 = np.full(grid2.size, self.scene.x_end)
         return np.stack([x1, grid2.ravel(), grid3.ravel()], axis=-1)
 
-    def directions(self, tracers):
+    def directions(self, tracers, aim_index=None):
         """Unit initial directions from each tracer to each aim point.
 
         Parameters
         ----------
         tracers : ndarray, shape (N, 2)
             Tracer positions ``(x2, x3)`` in the sheet.
+        aim_index : ndarray of int, shape (N,), optional
+            Only the ray of tracer i towards aim point ``aim_index[i]``.
 
         Returns
         -------
-        ndarray, float64, shape (N, M², 3)
+        ndarray, float64, shape (N, M², 3), or (N, 3) with ``aim_index``
         """
-        starts = self.scene.in_sheet(tracers)
-        return _unit(self.aim_points()[None, :, :] - starts[:, None, :])
+        return _toward(self.aim_points(), self.scene.in_sheet(tracers), aim_index)
 
     def collected(self, end_pos, end_dir):
         """Which exit rays the camera records: all of them. Shape (K,) bool."""
@@ -323,10 +332,10 @@ class PupilCamera:
         ] * up
         return self.centre + offsets
 
-    def directions(self, tracers):
-        """Unit initial directions from each tracer to each pupil point, shape (N, K, 3)."""
-        starts = self.scene.in_sheet(tracers)
-        return _unit(self.aim_points()[None, :, :] - starts[:, None, :])
+    def directions(self, tracers, aim_index=None):
+        """Unit initial directions from each tracer to each pupil point, shape (N, K, 3)
+        (or (N, 3): tracer i towards pupil point ``aim_index[i]``)."""
+        return _toward(self.aim_points(), self.scene.in_sheet(tracers), aim_index)
 
     def collected(self, end_pos, end_dir):
         """Which exit rays pass through the pupil when continued in a straight line.
@@ -602,7 +611,7 @@ class LensCamera:
         """Points ``(x1, x2, x3)`` spread area-uniformly over the pupil, shape (K, 3)."""
         return self.pupil.aim_points()
 
-    def directions(self, tracers):
+    def directions(self, tracers, aim_index=None):
         """Unit initial directions that reach the pupil points through a uniform fluid.
 
         Without a window, straight lines to the pupil points. With one, each direction is
@@ -612,15 +621,21 @@ class LensCamera:
         Parameters
         ----------
         tracers : ndarray, shape (N, 2)
+        aim_index : ndarray of int, shape (N,), optional
+            Only the ray of tracer i towards pupil point ``aim_index[i]``.
 
         Returns
         -------
-        ndarray, float64, shape (N, K, 3)
+        ndarray, float64, shape (N, K, 3), or (N, 3) with ``aim_index``
         """
         if self.window is None:
-            return self.pupil.directions(tracers)
+            return self.pupil.directions(tracers, aim_index)
         aims = self.aim_points()
-        lateral = aims[None, :, 1:] - np.asarray(tracers, dtype=np.float64)[:, None, :]
+        tracers = np.asarray(tracers, dtype=np.float64)
+        if aim_index is None:
+            lateral = aims[None, :, 1:] - tracers[:, None, :]
+        else:
+            lateral = aims[np.asarray(aim_index), 1:] - tracers
         reach = np.linalg.norm(lateral, axis=-1)
         # lateral run = Σ depth_i tan θ_i with sin θ_i = ratio_i sin θ (Snell at both faces)
         depths = np.array(

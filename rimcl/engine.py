@@ -766,39 +766,17 @@ class DeviceEngine:
             bar.update(count)
 
     def _take_sample(self, job, sampler, positions, plan):
-        """Hand the sampled rays to the run's sampler as the NumPy path does."""
+        """Hand the sampled rays to the run's sampler as the NumPy path does (their
+        directions made on the host for the sampled rays only)."""
         local = job.sample_rays.astype(np.int64)
         tracer = job.ids[local // self.rays]
-        aim = local % self.rays
-        unique, which = np.unique(tracer, return_inverse=True)
-        directions = self.camera.directions(positions[unique])[which, aim]
+        directions = self.camera.directions(positions[tracer], local % self.rays)
         origins, directions = _validate_rays(self.scene.in_sheet(positions[tracer]), directions)
         rows = _finish(
             origins, directions, job.host["sample_out"], job.host["sample_info"], plan.step, {}
         )
         collected = rows.ok & self.camera.collected(rows.end_pos, rows.end_dir)
-        batch_rays = len(job.ids) * self.rays
-        sparse = _SparseRays(batch_rays, local, rows)
-        full_collected = np.zeros(batch_rays, dtype=bool)
-        full_collected[local] = collected
-        sampler.take((self.first_tracer + int(job.ids[0])) * self.rays, sparse, full_collected)
-
-
-class _SparseRays:
-    """The sampled rays of a batch, at their places in the batch (other rows unset): what
-    the run's sampler reads from a :class:`rimcl.trace.TraceResult`."""
-
-    def __init__(self, count, rows, result):
-        for name in ("origins", "directions", "image_pos", "n_metric"):
-            values = np.empty((count, 3))
-            values[rows] = getattr(result, name)
-            setattr(self, name, values)
-        for name in ("deflection", "path_length"):
-            values = np.empty(count)
-            values[rows] = getattr(result, name)
-            setattr(self, name, values)
-        self.status = np.empty(count, dtype=result.status.dtype)
-        self.status[rows] = result.status
+        sampler.keep((self.first_tracer + int(job.ids[0])) * self.rays + local, rows, collected)
 
 
 def image_points(

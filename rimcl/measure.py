@@ -560,21 +560,36 @@ class _RaySampler:
         self.parts = []
 
     def take(self, offset, result, collected):
+        """Keep the chosen rays among rays ``offset, offset + 1, ...`` of a whole batch.
+
+        Parameters
+        ----------
+        offset : int
+            Run-wide index of the batch's first ray.
+        result : rimcl.trace.TraceResult
+            Every ray of the batch.
+        collected : ndarray, bool, shape (rays of the batch,)
+        """
         lo, hi = np.searchsorted(self.chosen, [offset, offset + len(result.status)])
         local = self.chosen[lo:hi] - offset
-        d0 = result.directions[local]
+        self.keep(self.chosen[lo:hi], result, collected, local)
+
+    def keep(self, rays, result, collected, rows=slice(None)):
+        """Keep rays ``rays`` (run-wide indices, increasing), whose records are the
+        ``rows`` of ``result`` and ``collected`` (default: all of them, in order)."""
+        d0 = result.directions[rows]
         self.parts.append(
             {
-                "ray": self.chosen[lo:hi],
+                "ray": rays,
                 "theta0": np.arctan2(np.linalg.norm(d0[:, 1:], axis=1), d0[:, 0]),
-                "deflection": result.deflection[local],
-                "n_metric": np.linalg.norm(result.n_metric[local], axis=1),
-                "path_length": result.path_length[local],
+                "deflection": result.deflection[rows],
+                "n_metric": np.linalg.norm(result.n_metric[rows], axis=1),
+                "path_length": result.path_length[rows],
                 "displacement": np.linalg.norm(
-                    result.image_pos[local, 1:] - result.origins[local, 1:], axis=1
+                    result.image_pos[rows, 1:] - result.origins[rows, 1:], axis=1
                 ),
-                "status": result.status[local],
-                "collected": collected[local],
+                "status": result.status[rows],
+                "collected": collected[rows],
             }
         )
 

@@ -160,3 +160,25 @@ def test_uniform_medium_images_every_ray_to_its_tracer(device, kind):
     assert (result.status == 0).all()
     np.testing.assert_allclose(result.image_pos, starts, atol=1e-9)
     assert camera.collected(result.end_pos, result.end_dir).all()
+
+
+@pytest.mark.parametrize("kind", ["plane", "pupil", "lens", "lens behind a window"])
+def test_directions_of_single_rays_equal_the_full_fan_bit_for_bit(kind):
+    """camera.directions(tracers, aim_index): the ray sample's directions, made per ray."""
+    from rimcl.camera import FlatWindow, LensCamera
+
+    scene = Scene.from_grid((0, 0, 0), (0.1, 0.1, 0.1), (64, 64, 64), "clamp", x_sheet=3.2)
+    if kind == "plane":
+        camera = PlaneCamera(scene, 9)
+    elif kind == "pupil":
+        camera = PupilCamera(scene, 2.0, 20.0, view_angle=12.0, rays=70)
+    else:
+        window = FlatWindow(5.0) if "window" in kind else None
+        camera = LensCamera(scene, 0.01, magnification=0.2, window=window, rays=70)
+    rng = np.random.default_rng(4)
+    tracers = rng.uniform(0.5, 5.9, size=(40, 2))
+    aim_index = rng.integers(0, camera.rays_per_tracer, size=40)
+    every = camera.directions(tracers)
+    np.testing.assert_array_equal(
+        camera.directions(tracers, aim_index), every[np.arange(40), aim_index]
+    )
