@@ -6,7 +6,7 @@ until per-tracer rows come back), with the reference of each engine made once an
 for every case, as ``rimcl study`` does:
 
 - ``default study``: the built-in scene of ``rimcl study`` (shipped 64³ sample, 400
-  tracers, 24 x 24 rays each, 2048 px, σ 7 px, cases C0-C4, 3 frames);
+  tracers, 24 x 24 rays each, 2048 px, σ 7 px, cases C0-C4, 5 frames);
 - ``paper density``: the same scene with the paper's 100 x 100 = 1e4 rays per tracer
   (fewer tracers: ``--paper-tracers``).
 
@@ -14,7 +14,8 @@ Printed per scene and engine: wall time, stage times (``trace``: the trace kerne
 the device engine the fan kernel that also back-projects; ``render`` and ``centroid``: the
 NumPy engine's stages, or the device engine's image kernel, which does both), host CPU
 time per tracer image of the device engine (the main thread's CPU time in the engine's
-frame loop: preparing batches, reading rows, forming columns), rays per second end to end
+frame loop: preparing batches, reading rows, forming columns; the run's fixed ray sample
+excluded), rays per second end to end
 (rays traced / wall time, reference included), and the ratio of the wall times
 numpy / device. Machines drift by 30-40 % from minute to minute (DESIGN §11): only the
 ratios of one run mean anything.
@@ -38,7 +39,7 @@ from rimcl.provenance import to_json, versions
 from rimcl.scene import load_scene
 
 ENGINES = ("numpy", "device")
-TIMINGS = ("track", "trace", "render", "centroid", "engine_host")
+TIMINGS = ("track", "trace", "render", "centroid", "engine_host", "ray_sample")
 
 
 def configs(scene, cases, engine, device, tracers=None, fan=None):
@@ -144,7 +145,9 @@ def main():
             f"{'track':>6s} {'host us/img':>11s} {'rays/s':>9s}"
         )
         for engine, row in rows.items():
-            host = row["engine_host"] / row["images"] * 1e6 if engine == "device" else None
+            host = None
+            if engine == "device":  # per image: without the run's fixed ray sample
+                host = (row["engine_host"] - row["ray_sample"]) / row["images"] * 1e6
             print(
                 f"{engine:7s} {row['wall_s']:8.2f} {row['trace']:7.2f} {row['render']:7.2f} "
                 f"{row['centroid']:8.2f} {row['track']:6.2f} "

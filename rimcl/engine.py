@@ -33,7 +33,8 @@ with ``cl_khr_fp64`` (CPUs, NVIDIA and AMD GPUs).
 Stage times of a measurement (``RenderResult.timings``): ``trace`` is the fan kernel,
 ``render`` the image kernel (render and locate: ``centroid`` stays 0), ``engine_host``
 the main thread's CPU time in the engine's frame loop (batches prepared, rows read and
-turned into columns).
+turned into columns), of which ``ray_sample`` went to the run's ray sample (a fixed number
+of rays per run, whatever the number of tracers).
 """
 
 import dataclasses
@@ -761,7 +762,11 @@ class DeviceEngine:
         setup.timings["trace"] += _seconds(job.fan_event)
         setup.timings["render"] += _seconds(job.image_event)
         if job.sample_rays is not None and len(job.sample_rays):
+            started = time.thread_time()
             self._take_sample(job, sampler, positions, plan)
+            setup.timings["ray_sample"] = setup.timings.get("ray_sample", 0.0) + (
+                time.thread_time() - started
+            )
         if bar is not None:
             bar.update(count)
 
