@@ -13,7 +13,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_engine import PIXEL, SAMPLE, _assert_same, _clouds
+from test_engine import PIXEL, SAMPLE, _assert_same, _clouds, assert_engines_agree
 
 from rimcl.centroid import TracerFlag
 from rimcl.config import MeasureConfig, SensorConfig
@@ -193,19 +193,8 @@ def test_measurement_matches_the_numpy_engine(device, case, sensor, options):
     numpy_result = _sensor_render("numpy", case, sensor, **options)
     device_result = _sensor_render("device", case, sensor, **options)
     assert device_result.config["render"] == numpy_result.config["render"]
-    pixel = numpy_result.attrs["pixel_size"]
-    same_images = np.array_equal(numpy_result.frame_image, device_result.frame_image)
-    expected, got = numpy_result.tracers, device_result.tracers
-    for name, values in expected.items():
-        if name.startswith(("flags", "notes", "area", "n_rays", "id", "frame")):
-            np.testing.assert_array_equal(got[name], values, err_msg=name)
-        elif name.startswith(("x2_", "x3_")) and "opt" not in name and "true" not in name:
-            if same_images:
-                np.testing.assert_array_equal(got[name], values, err_msg=name)
-            else:
-                np.testing.assert_allclose(got[name], values, rtol=0, atol=1e-3 * pixel)
-        else:
-            np.testing.assert_allclose(got[name], values, rtol=1e-12, atol=1e-9 * pixel)
+    assert_engines_agree(numpy_result, device_result)
+    expected = numpy_result.tracers
     # noise: the measured and reference images of a tracer draw independently
     if sensor.noise:
         both = np.isfinite(expected["x2_ref"]) & np.isfinite(expected["x2_meas"])
