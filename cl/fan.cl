@@ -24,6 +24,11 @@
  *     back-projected onto the focus plane x1 = focus_x1.
  * Optional: RIMCL_MIE (rimcl_mie.h): 0 (default) every ray weighs 1 and ray_weight is not
  *   written; otherwise each ray's Mie weight from its initial direction goes to ray_weight.
+ *   RIMCL_STRAIGHT: 1 for a uniform field (the reference medium, G = 0): no trace, each
+ *   ray runs straight to x1 = x_end_exact in float64 as rimcl.trace.straight_rays (0
+ *   steps; max_steps past a path of max_length, exit_side past the lateral box box23 =
+ *   (lo2, hi2, lo3, hi3), turned_back if it does not move towards the plane); its sample
+ *   records are not written (the host makes them). Default 0.
  * Needs cl_khr_fp64.
  * Units: lengths in field units; image points in pixels of the camera (pixel i spans
  *   [i, i + 1) from the image origin); refractive indices as ratios (dimensionless).
@@ -71,6 +76,10 @@
 #define LENS_NEWTON_STEPS 50
 
 #define RAY_COLLECTED 8
+
+#ifndef RIMCL_STRAIGHT
+#define RIMCL_STRAIGHT 0
+#endif
 
 /* (x0^2 + x1^2) + x2^2, the order of numpy.linalg.norm over a row of 3 */
 RIMCL_INLINE double norm3(double a, double b, double c)
@@ -187,7 +196,8 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
                         __global const int *sample_rays, const int n_sample,
                         __global float *sample_out, __global int4 *sample_info,
                         __global const double *mie, const int mie_terms,
-                        __global double *ray_weight)
+                        __global double *ray_weight, const double x_end_exact,
+                        const double max_length, const double4 box23)
 {
     const int first = get_global_id(0) * RIMCL_LANES;
     if (first >= n_rays)
@@ -198,6 +208,9 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
      * (hi, lo) pairs) do; lanes past the last ray repeat it and are never stored. */
     lvec3 origin_hi, origin_lo, dir_hi, dir_lo;
     lmask valid;
+#if RIMCL_STRAIGHT
+    double lane_start[RIMCL_LANES][3], lane_dir[RIMCL_LANES][3];
+#endif
 #pragma unroll
     for (int k = 0; k < RIMCL_LANES; ++k) {
         const int ray = (first + k < n_rays) ? first + k : n_rays - 1;
@@ -212,6 +225,12 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
             ray_weight[ray] = mie_weight(mie, mie_terms, d);
 #endif
         normalise3(d);
+#if RIMCL_STRAIGHT
+        for (int q = 0; q < 3; ++q) {
+            lane_start[k][q] = start[q];
+            lane_dir[k][q] = d[q];
+        }
+#endif
         float o_hi[3], o_lo[3], d_hi[3], d_lo[3];
         for (int q = 0; q < 3; ++q) {
             o_hi[q] = (float)start[q];
@@ -238,28 +257,56 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
 #endif
     }
 
+#if RIMCL_STRAIGHT
+    (void)valid;
+    (void)max_steps;
+#else
     const lane_result res =
         trace_lanes(FIELD_PASS, origin_hi, origin_lo, dir_hi, dir_lo, valid, max_steps);
+#endif
 
 #pragma unroll
     for (int k = 0; k < RIMCL_LANES; ++k) {
         const int ray = first + k;
         if (ray >= n_rays)
             break;
+        double end[3], dir[3];
+#if RIMCL_STRAIGHT
+        int status, steps = 0;
+        {
+            /* rimcl.trace.straight_rays, the same float64 operations, none fused */
+#pragma OPENCL FP_CONTRACT OFF
+            const double *start = lane_start[k], *d = lane_dir[k];
+            const double run_x = (x_end_exact - start[0]) / d[0];
+            const double length = norm3(d[0], d[1], d[2]);
+            for (int q = 0; q < 3; ++q) {
+                end[q] = start[q] + run_x * d[q];
+                dir[q] = d[q] / length;
+            }
+            const int outside = (end[1] < box23.x) | (end[1] > box23.y) | (end[2] < box23.z) |
+                                (end[2] > box23.w);
+            status = (run_x > max_length) ? RAY_MAX_STEPS : RAY_OK;
+            status = outside ? RAY_EXIT_SIDE : status;
+            status = (!(run_x > 0.0) || isinf(run_x)) ? RAY_TURNED_BACK : status;
+        }
+#else
+        (void)x_end_exact;
+        (void)max_length;
+        (void)box23;
         /* the exit record as trace.cl writes it, joined in float64 as the host joins it */
         float record[RAY_OUT_STRIDE];
         int4 info;
         lane_record(&res, k, record, &info);
-        const int status = info.y;
-        double end[3], tangent[3];
+        const int status = info.y, steps = info.x;
+        double tangent[3];
         for (int q = 0; q < 3; ++q) {
             end[q] = (double)record[q] + (double)record[3 + q];
             tangent[q] = (double)record[6 + q] + (double)record[9 + q];
         }
         const double length = norm3(tangent[0], tangent[1], tangent[2]);
-        double dir[3];
         for (int q = 0; q < 3; ++q)
             dir[q] = tangent[q] / length;
+#endif
 #if RIMCL_CAMERA == 2
         /* through the window; back-projection onto the focus plane (LensCamera.image_points) */
         through_window(camera, end, dir);
@@ -292,8 +339,9 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
             usable ? (double2)((image2 - camera[CAM_IMAGE_ORIGIN]) / pixel_size,
                                (image3 - camera[CAM_IMAGE_ORIGIN + 1]) / pixel_size)
                    : (double2)(NAN, NAN);
-        ray_steps[ray] = info.x;
+        ray_steps[ray] = steps;
         ray_code[ray] = (uchar)(status | (usable ? RAY_COLLECTED : 0));
+#if !RIMCL_STRAIGHT
         if (n_sample > 0) {
             const int slot = sample_slot(sample_rays, n_sample, ray);
             if (slot >= 0) {
@@ -303,6 +351,12 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
                 sample_info[slot] = info;
             }
         }
+#else
+        (void)sample_rays;
+        (void)n_sample;
+        (void)sample_out;
+        (void)sample_info;
+#endif
     }
 }
 

@@ -57,6 +57,7 @@ from rimcl.trace import (
     default_kernel_shape,
     plan_steps,
     prepare_launch,
+    straight_rays,
 )
 
 #: The exact renderer's Gaussian is cut this many σ from the ray: the light left out is
@@ -428,6 +429,22 @@ class DeviceImager:
 
 
 @dataclasses.dataclass
+class _Frame:
+    """What the batches of one frame share (``DeviceEngine.image_frame``'s arguments, the
+    field and its step plan)."""
+
+    setup: object
+    pass_: object
+    frame: int
+    scales: object
+    sampler: object
+    bar: object
+    positions: np.ndarray
+    field: object
+    plan: object
+
+
+@dataclasses.dataclass
 class _Batch:
     """One batch in flight: its tracers, host arrays and pending events."""
 
@@ -541,6 +558,8 @@ class DeviceEngine:
     def _fan(self, field, trace_options, positions, name="trace_fan"):
         """The fan kernel (``name`` of ``cl/fan.cl``) and its trace arguments for this field
         and settings."""
+        import pyopencl as cl
+
         from rimcl.device import context_for
         from rimcl.program import build_program, get_kernel
 
@@ -566,7 +585,16 @@ class DeviceEngine:
             **launch.defines,
             "RIMCL_CAMERA": self._camera_kind(),
             "RIMCL_MIE": self.mie_mode,
+            "RIMCL_STRAIGHT": int(field.is_uniform),
         }
+        # a uniform field's straight rays: the exit plane and the lateral box, in float64
+        self.straight_args = (
+            np.float64(x_end),
+            np.float64(launch.max_steps * plan.step * field.n_ref),  # straight_path_limit
+            cl.cltypes.make_double4(
+                field.box_lo[1], field.box_hi[1], field.box_lo[2], field.box_hi[2]
+            ),
+        )
         kernel = get_kernel(build_program(context_for(device), "fan.cl", defines), name)
         return kernel, launch, plan
 
@@ -645,6 +673,7 @@ class DeviceEngine:
         extras = extras or {}
         sampler, canvas, bar = extras.get("sampler"), extras.get("canvas"), extras.get("bar")
         kernel, launch, plan = self._fan(field, setup.trace_options, positions)
+        context = _Frame(setup, pass_, frame, scales, sampler, bar, positions, field, plan)
         if canvas is not None:
             self.imager.use_canvas(canvas.counts.shape)
         per_tracer_weights = np.ndim(weights) == 2
@@ -668,10 +697,10 @@ class DeviceEngine:
             )
             self.queue.flush()
             if pending is not None:
-                self._collect(pending, setup, pass_, frame, scales, sampler, bar, positions, plan)
+                self._collect(pending, context)
             pending = job
         if pending is not None:
-            self._collect(pending, setup, pass_, frame, scales, sampler, bar, positions, plan)
+            self._collect(pending, context)
         if canvas is not None:
             summed = self.imager.read_canvas()
             total = canvas.counts.astype(np.int64) + summed
@@ -721,6 +750,7 @@ class DeviceEngine:
             *self.ray_buffers,
             *sample_args,
             *self.mie_args,
+            *self.straight_args,
         )
         items = -(-n_rays // launch.shape.lanes)
         items = -(-items // FAN_GROUP) * FAN_GROUP
@@ -747,41 +777,50 @@ class DeviceEngine:
         events += self.imager.enqueue_read(host["rows_l"][:count], host["rows_d"][:count])
         return _Batch(ids, host, events, fan_event, image_event, sample_rays)
 
-    def _collect(self, job, setup, pass_, frame, scales, sampler, bar, positions, plan):
+    def _collect(self, job, context):
         import pyopencl as cl
 
         cl.wait_for_events(job.events)
         count = len(job.ids)
         rows_l, rows_d = job.host["rows_l"][:count], job.host["rows_d"][:count]
+        scales, pass_, timings = context.scales, context.pass_, context.setup.timings
         columns = self.imager.columns(rows_l, rows_d, None if scales is None else scales[job.ids])
         for name, values in columns.items():
-            pass_.images[name][frame, job.ids] = values
+            pass_.images[name][context.frame, job.ids] = values
         pass_.status_counts += rows_l[:, _ROW_STATUS : _ROW_STATUS + len(STATUS_NAMES)].sum(0)
         pass_.vignetted += int(rows_l[:, _ROW_VIGNETTED].sum())
         pass_.ray_steps += int(rows_l[:, _ROW_STEPS].sum())
-        setup.timings["trace"] += _seconds(job.fan_event)
-        setup.timings["render"] += _seconds(job.image_event)
+        timings["trace"] += _seconds(job.fan_event)
+        timings["render"] += _seconds(job.image_event)
         if job.sample_rays is not None and len(job.sample_rays):
             started = time.thread_time()
-            self._take_sample(job, sampler, positions, plan)
-            setup.timings["ray_sample"] = setup.timings.get("ray_sample", 0.0) + (
-                time.thread_time() - started
-            )
-        if bar is not None:
-            bar.update(count)
+            self._take_sample(job, context)
+            timings["ray_sample"] = timings.get("ray_sample", 0.0) + (time.thread_time() - started)
+        if context.bar is not None:
+            context.bar.update(count)
 
-    def _take_sample(self, job, sampler, positions, plan):
+    def _take_sample(self, job, context):
         """Hand the sampled rays to the run's sampler as the NumPy path does (their
-        directions made on the host for the sampled rays only)."""
+        directions made on the host for the sampled rays only; through a uniform field
+        the host's straight rays)."""
         local = job.sample_rays.astype(np.int64)
+        positions, field = context.positions, context.field
         tracer = job.ids[local // self.rays]
         directions = self.camera.directions(positions[tracer], local % self.rays)
-        origins, directions = _validate_rays(self.scene.in_sheet(positions[tracer]), directions)
-        rows = _finish(
-            origins, directions, job.host["sample_out"], job.host["sample_info"], plan.step, {}
-        )
+        origins = self.scene.in_sheet(positions[tracer])
+        if field.is_uniform:
+            limit = self.straight_args[1]
+            rows = straight_rays(
+                field, origins, directions, x_end=self.scene.x_end, max_length=limit
+            )
+        else:
+            origins, directions = _validate_rays(origins, directions)
+            out, info = job.host["sample_out"], job.host["sample_info"]
+            rows = _finish(origins, directions, out, info, context.plan.step, {})
         collected = rows.ok & self.camera.collected(rows.end_pos, rows.end_dir)
-        sampler.keep((self.first_tracer + int(job.ids[0])) * self.rays + local, rows, collected)
+        context.sampler.keep(
+            (self.first_tracer + int(job.ids[0])) * self.rays + local, rows, collected
+        )
 
 
 def image_points(

@@ -9,6 +9,7 @@ rays, is contiguous; gradients are ``(n3, n2, n1, 3)`` with components along
 """
 
 import dataclasses
+import functools
 
 import numpy as np
 
@@ -165,6 +166,11 @@ class Field:
     def box_hi(self):
         """Upper corner of the region rays may move in (``+inf`` where periodic)."""
         return np.full(3, np.inf) if self.periodic else self.grid_hi
+
+    @functools.cached_property
+    def is_uniform(self):
+        """δn and ∇n are zero everywhere: rays go straight (:func:`rimcl.trace.straight_rays`)."""
+        return not (np.any(self.delta_n) or np.any(self.gradient))
 
     @property
     def delta_n_range(self):

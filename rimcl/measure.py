@@ -38,7 +38,13 @@ from rimcl.memory import check_field_memory, check_field_upload, check_render_me
 from rimcl.provenance import atomic_path, check_output, stamp_h5, to_json
 from rimcl.render import FrameImage
 from rimcl.sensor import MEASURED_PASS, REFERENCE_PASS
-from rimcl.trace import STATUS_NAMES, default_step, trace_rays
+from rimcl.trace import (
+    STATUS_NAMES,
+    default_step,
+    straight_path_limit,
+    straight_rays,
+    trace_rays,
+)
 from rimcl.track import (
     SheetVelocity,
     integrate_tracks,
@@ -516,7 +522,16 @@ def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None
         origins = np.repeat(scene.in_sheet(positions[ids]), rays, axis=0)
         directions = camera.directions(positions[ids]).reshape(-1, 3)
         start = time.perf_counter()
-        result = trace_rays(field, origins, directions, x_end=scene.x_end, **setup.trace_options)
+        if field.is_uniform:  # the reference medium, G = 0: straight lines, no steps
+            options = setup.trace_options
+            limit = straight_path_limit(
+                field, options["step"], scene.x_end, origins, directions, options["precision"]
+            )
+            result = straight_rays(field, origins, directions, x_end=scene.x_end, max_length=limit)
+        else:
+            result = trace_rays(
+                field, origins, directions, x_end=scene.x_end, **setup.trace_options
+            )
         timings["trace"] += time.perf_counter() - start
         ok = result.status == 0
         collected = ok & camera.collected(result.end_pos, result.end_dir)

@@ -231,3 +231,28 @@ def test_device_engine_reuses_the_reference_of_another_case(device):
     fresh = run_render(None, case="C2", config=config)
     for name, values in fresh.tracers.items():
         np.testing.assert_array_equal(again.tracers[name], values, err_msg=name)
+
+
+def test_straight_reference_with_side_exits_matches_the_numpy_engine(device):
+    """The reference through a uniform clamped box (straight rays, no steps on either
+    engine) with rays that leave the box sideways, and a G = 0 case imaged the same way."""
+    options = {
+        **SAMPLE,
+        "device": device,
+        "camera": "pupil",
+        "view_angle": 40.0,
+        "aperture_diameter": 3.0,
+    }
+    results = {}
+    for engine in ("numpy", "device"):
+        config = MeasureConfig.from_options(engine=engine, frame_image=True, **options)
+        config = dataclasses.replace(config, box=((0.0, 3.2), (0.0, 6.2), (0.0, 6.2)))
+        results[engine] = run_render(None, case="G=0", config=config)
+    assert_engines_agree(results["numpy"], results["device"])
+    for result in results.values():
+        assert result.reference.ray_counts["exit_side"] > 0
+        assert result.reference.ray_steps == 0 and result.ray_attrs["ray_steps"] == 0
+        # G = 0 images through the same straight rays: no refraction error at all
+        tracers = result.tracers
+        np.testing.assert_array_equal(tracers["x2_meas"], tracers["x2_ref"])
+        np.testing.assert_array_equal(tracers["x3_opt"], tracers["x3_opt_ref"])

@@ -278,3 +278,41 @@ def test_a_step_larger_than_the_field_is_refused(device):
     field = _stratified_field(0.0)
     with pytest.raises(RimclError, match="larger than the field"):
         rimcl.trace_rays(field, [[0, 0, 0]], [[1, 0, 0]], x_end=1.0, step=5.0, device=device)
+
+
+@pytest.mark.parametrize("boundary", ["periodic", "clamp"])
+def test_straight_rays_are_what_the_integrator_traces_in_a_uniform_field(device, boundary):
+    """rimcl.trace.straight_rays (the reference medium's closed form) against the
+    float64 trace: the same status for rays that end well inside, well past the side, or
+    move away from the exit plane, and the same exit points and image points."""
+    from rimcl.trace import straight_rays
+
+    field = rimcl.Field.from_arrays(
+        np.zeros((16, 16, 16), dtype=np.float32), spacing=(0.1, 0.1, 0.1), boundary=boundary
+    )
+    assert field.is_uniform
+    rng = np.random.default_rng(7)
+    count = 300
+    origins = np.column_stack(
+        [np.full(count, 0.05), rng.uniform(0.4, 1.1, count), rng.uniform(0.4, 1.1, count)]
+    )
+    x_end = 1.2
+    targets = np.column_stack(
+        [np.full(count, x_end), rng.uniform(0.3, 1.2, count), rng.uniform(0.3, 1.2, count)]
+    )
+    targets[:100, 1] += 3.0  # far past the side of a clamped box, long before the plane
+    directions = targets - origins
+    directions[-50:, 0] *= -1  # away from the exit plane
+    traced = rimcl.trace_rays(
+        field, origins, directions, x_end=x_end, precision="f64", device=device
+    )
+    straight = straight_rays(field, origins, directions, x_end=x_end)
+    np.testing.assert_array_equal(straight.status, traced.status)
+    expected = {"periodic": [250, 0, 50], "clamp": [150, 100, 50]}[boundary]
+    assert [int(np.sum(straight.status == k)) for k in range(3)] == expected
+    ok = traced.ok
+    np.testing.assert_allclose(straight.end_pos[ok], traced.end_pos[ok], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(straight.image_pos[ok], traced.image_pos[ok], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(straight.image_pos[ok], origins[ok], rtol=0, atol=1e-15)
+    assert np.all(straight.steps == 0) and np.all(straight.n_metric == 0)
+    np.testing.assert_allclose(straight.path_length[ok], traced.path_length[ok], rtol=1e-6)
