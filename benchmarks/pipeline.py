@@ -23,6 +23,11 @@ ratios of one run mean anything.
     python benchmarks/pipeline.py                      # default device
     python benchmarks/pipeline.py --device nvidia --paper-tracers 300 --json gpu.json
     python benchmarks/pipeline.py --profile            # + cProfile of the device engine's host
+    python benchmarks/pipeline.py --device nvidia --scale-run 100000   # + DESIGN §14's run
+
+``--scale-run N`` adds, on the device engine only, one case (C1) of ``N`` tracers x 1e4
+rays x 3 frames plus its reference, end to end (the H100 target: 1e5 tracers in under
+2 minutes).
 """
 
 import argparse
@@ -96,6 +101,24 @@ def warm_up(scene, device, sizes):
             run_render(None, case="C1", config=one_frame)
 
 
+def scale_run(scene, device, tracers):
+    """One case at paper density (``tracers`` x 1e4 rays x 3 frames, its reference
+    included) through the device engine, end to end; prints and returns its times."""
+    config = configs(scene, ["C1"], "device", device, tracers=tracers, fan=100)["C1"]
+    config = dataclasses.replace(config, time=dataclasses.replace(config.time, frames=3))
+    start = time.perf_counter()
+    result = run_render(None, case="C1", config=config)
+    wall = time.perf_counter() - start
+    rays = 2 * 3 * tracers * result.attrs["rays_per_tracer"]
+    row = {"tracers": tracers, "wall_s": wall, "rays_per_s": rays / wall, **result.timings}
+    print(
+        f"\nscale run: C1, {tracers} tracers x 1e4 rays x 3 frames + reference: {wall:.1f} s "
+        f"wall ({row['rays_per_s']:.3g} rays/s; trace {row['trace']:.1f} s, render "
+        f"{row['render']:.1f} s, host {row.get('engine_host', 0.0):.1f} s)"
+    )
+    return row
+
+
 def profile_device(per_case):
     """cProfile of one case through the device engine: where the host time goes."""
     case, config = next(iter(per_case.items()))
@@ -116,6 +139,9 @@ def main():
     parser.add_argument("--paper-tracers", type=int, default=24)
     parser.add_argument("--profile", action="store_true", help="Profile the device host.")
     parser.add_argument("--json", default=None, help="Also write the results to this file.")
+    parser.add_argument(
+        "--scale-run", type=int, default=None, metavar="N", help="One case, N tracers x 1e4 rays."
+    )
     args = parser.parse_args()
 
     device = select_device(args.device)
@@ -154,6 +180,8 @@ def main():
                 f"{'-' if host is None else f'{host:.0f}':>11s} {row['rays_per_s']:9.3g}"
             )
         print(f"device engine / numpy engine: {ratio:.2f}x faster")
+    if args.scale_run:
+        report["scale_run"] = scale_run(scene, device, args.scale_run)
     if args.profile:
         per_case = configs(scene, ["C1"], "device", device, tracers=args.tracers)
         report["profile"] = profile_device(per_case)
