@@ -23,7 +23,8 @@
  *
  * Required defines: RIMCL_RENDERER (0 exact, 1 paper), RIMCL_CENTROID (0 excess weights,
  *   1 grey weights). Optional: RIMCL_NOISE (0, default: the deterministic camera; 1: sensor
- *   noise), RIMCL_POCL_FAST (rimcl_inline.h).
+ *   noise), RIMCL_SPLAT_BLOCK (sources added per pass over the image, default 8),
+ *   RIMCL_POCL_FAST (rimcl_inline.h).
  * Needs cl_khr_fp64.
  * Units: pixels of the camera (pixel i spans [i, i + 1)); light in units of ray weight;
  *   counts of the camera; electrons (e-) of the sensor. Pixel (i, j) of a window is pixel
@@ -48,7 +49,8 @@
  *   counts of every window added in (clipped to full scale by the host).
  * Scratch per slot: image (max_window^2 + 8 doubles), labels and border (max_window^2 ints
  *   each), component light (2 max_window^2 ints), sources (rays double2 and rays doubles),
- *   factors (2 table_width doubles; table_width >= the footprint + 9, a multiple of 8).
+ *   factors (RIMCL_SPLAT_BLOCK x 2 table_width doubles; table_width >= the footprint + 9,
+ *   a multiple of 8, with room for the union of a few nearby footprints).
  */
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
@@ -297,6 +299,68 @@ RIMCL_INLINE void splat(const double2 position, const double weight, const int w
     }
 }
 
+/* Sources added in one pass over their union footprint (each pixel loaded and stored
+ * once per block instead of once per source; the sums keep the source order). */
+#ifndef RIMCL_SPLAT_BLOCK
+#define RIMCL_SPLAT_BLOCK 8
+#endif
+
+/* splat() of `count` sources one after another, in one pass where their union footprint
+ * fits the factor tables: every pixel adds the sources' light in their order, adding an
+ * exact 0 for a source whose footprint misses it, so the sums are splat()'s bit for bit.
+ * `factors` holds RIMCL_SPLAT_BLOCK x 2 tables of table_width doubles. */
+RIMCL_INLINE void splat_block(const double2 *positions, const double *weights, const int count,
+                              const int width, const int height, const int radius,
+                              const int table_width, __constant const double *consts,
+                              __global double *image, __global double *factors)
+{
+    int x0[RIMCL_SPLAT_BLOCK], y0[RIMCL_SPLAT_BLOCK], y1[RIMCL_SPLAT_BLOCK];
+    int lo_x = width, hi_x = 0, lo_y = height, hi_y = 0;
+    for (int k = 0; k < count; ++k) {
+        const int cx = (int)positions[k].x, cy = (int)positions[k].y;
+        x0[k] = max(0, cx - radius);
+        y0[k] = max(0, cy - radius);
+        y1[k] = min(height, cy + radius + 1);
+        lo_x = min(lo_x, x0[k]);
+        hi_x = max(hi_x, min(width, cx + radius + 1));
+        lo_y = min(lo_y, y0[k]);
+        hi_y = max(hi_y, y1[k]);
+    }
+    const int span = hi_x - lo_x;
+    if (count == 1 || span + 8 > table_width) {
+        for (int k = 0; k < count; ++k)
+            splat(positions[k], weights[k], width, height, radius, table_width, consts, image,
+                  factors);
+        return;
+    }
+    for (int k = 0; k < count; ++k) {
+        __global double *across = factors + 2 * k * table_width;
+        __global double *down = across + table_width;
+        int f0, f1, g0, g1;
+        /* this source's factors at its place in the union; zeros elsewhere */
+        source_factors(positions[k].x, width, radius, 1.0, consts, across + (x0[k] - lo_x),
+                       &f0, &f1);
+        for (int i = 0; i < x0[k] - lo_x; ++i)
+            across[i] = 0.0;
+        for (int i = f1 - lo_x; i < table_width; ++i)
+            across[i] = 0.0;
+        source_factors(positions[k].y, height, radius, weights[k], consts, down, &g0, &g1);
+    }
+    for (int j = lo_y; j < hi_y; ++j) {
+        double g[RIMCL_SPLAT_BLOCK];
+        for (int k = 0; k < count; ++k)
+            g[k] = (j >= y0[k] && j < y1[k]) ? factors[(2 * k + 1) * table_width + j - y0[k]]
+                                             : 0.0;
+        __global double *line = image + j * width + lo_x;
+        for (int i = 0; i < span; i += 8) {
+            double8 sum = LOAD8(line + i);
+            for (int k = 0; k < count; ++k)
+                sum = sum + g[k] * LOAD8(factors + 2 * k * table_width + i);
+            STORE8(sum, line + i);
+        }
+    }
+}
+
 #if RIMCL_NOISE
 /* rimcl/sensor.py _box_muller: a standard normal of two uniforms. */
 RIMCL_INLINE double box_muller(const double u_radius, const double u_angle)
@@ -430,7 +494,10 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
         image[p] = 0.0;
     long outside = 0;
 #if RIMCL_RENDERER == 0
-    /* each usable ray inside the window, in ray order */
+    /* each usable ray inside the window, in ray order, RIMCL_SPLAT_BLOCK at a time */
+    double2 block[RIMCL_SPLAT_BLOCK];
+    double block_weight[RIMCL_SPLAT_BLOCK];
+    int in_block = 0;
     for (int k = 0; k < rays; ++k) {
         if (!(ray_code[k] & RAY_COLLECTED))
             continue;
@@ -439,8 +506,17 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
             outside += 1;
             continue;
         }
-        splat(spot, ray_weight[k], w_px, h_px, radius, table_width, consts, image, s.factors);
+        block[in_block] = spot;
+        block_weight[in_block++] = ray_weight[k];
+        if (in_block == RIMCL_SPLAT_BLOCK) {
+            splat_block(block, block_weight, in_block, w_px, h_px, radius, table_width, consts,
+                        image, s.factors);
+            in_block = 0;
+        }
     }
+    if (in_block > 0)
+        splat_block(block, block_weight, in_block, w_px, h_px, radius, table_width, consts,
+                    image, s.factors);
 #else
     /* the pixels hit, in the order of first hit, each with its summed weight (numpy's
      * bincount adds the weights in ray order), then each spread by the kernel */
@@ -465,9 +541,17 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
         }
         s.weights[labels[pixel]] += ray_weight[k];
     }
-    for (int n = 0; n < n_sources; ++n)
-        splat(s.sources[n], s.weights[n], w_px, h_px, radius, table_width, consts, image,
-              s.factors);
+    for (int n = 0; n < n_sources; n += RIMCL_SPLAT_BLOCK) {
+        double2 block[RIMCL_SPLAT_BLOCK];
+        double block_weight[RIMCL_SPLAT_BLOCK];
+        const int in_block = min(RIMCL_SPLAT_BLOCK, n_sources - n);
+        for (int k = 0; k < in_block; ++k) {
+            block[k] = s.sources[n + k];
+            block_weight[k] = s.weights[n + k];
+        }
+        splat_block(block, block_weight, in_block, w_px, h_px, radius, table_width, consts,
+                    image, s.factors);
+    }
 #endif
     flags |= (outside > 0) ? FLAG_RAYS_OUTSIDE_WINDOW : 0;
 
@@ -687,7 +771,7 @@ __kernel void image_tracers(__constant const double *consts, const int n_tracers
     s.light_high = s.light_low + window_area;
     s.sources = source_pool + slot * rays;
     s.weights = source_weight_pool + slot * rays;
-    s.factors = factor_pool + slot * 2 * table_width;
+    s.factors = factor_pool + slot * 2 * RIMCL_SPLAT_BLOCK * table_width;
     for (;;) {
         const int t = atomic_inc(next_tracer);
         if (t >= n_tracers)

@@ -88,6 +88,12 @@ FAN_GROUP = 64
 #: flight hide more of the field's memory latency: +13 % ray-steps per CPU-second on the
 #: shipped 64³ periodic sample, the same on a 128³ clamped field; results are identical).
 FAN_CPU_LANES = 16
+#: Sources (rays, or the paper renderer's pixels) the image kernel adds to a window in one
+#: pass (each pixel loaded and stored once per block; the same sums in the same order).
+SPLAT_BLOCK = 8
+#: Pixels of room in the factor tables for the union of a block's footprints (a block
+#: whose union is wider is added source by source).
+SPLAT_SLACK = 32
 #: Largest share of the device memory the image scratch may take.
 SCRATCH_SHARE = 0.25
 #: Rays per batch up to which batches are enlarged to fill the image slots (about 700 MB of
@@ -171,8 +177,8 @@ class DeviceImager:
             self.radius = int(TRUNCATE_SIGMAS * sigma + 0.5)
             kernel = _paper_kernel(sigma, self.radius)
         window = int(renderer.max_window)
-        # a footprint's edges, rounded up to whole double8 vectors, plus one spare vector
-        self.table_width = (min(2 * self.radius + 2, window + 1) + 15) // 8 * 8
+        # a footprint's edges, plus room for the union of a block of nearby footprints
+        self.table_width = (min(2 * self.radius + 2 + SPLAT_SLACK, window + 1) + 15) // 8 * 8
         cpu = bool(device.type & cl.device_type.CPU)
         # CPUs: a work-group per slot, so that slots spread over the cores; GPUs: many slots
         self.group = 1 if cpu else GPU_GROUP
@@ -182,6 +188,7 @@ class DeviceImager:
             "RIMCL_RENDERER": 0 if renderer.kind == "exact" else 1,
             "RIMCL_CENTROID": 0 if imaging.centroid_weights == "excess" else 1,
             "RIMCL_POCL_FAST": int(is_pocl(device)),
+            "RIMCL_SPLAT_BLOCK": SPLAT_BLOCK,
         }
         if sensor.noise:
             defines["RIMCL_NOISE"] = 1
@@ -194,7 +201,7 @@ class DeviceImager:
         consts = np.concatenate([camera, electrons, kernel]).astype(np.float64)
         self.consts = cl.Buffer(context, ro, hostbuf=consts)
         area = window * window
-        slot_bytes = area * 24 + self.rays * 24 + 16 * self.table_width
+        slot_bytes = area * 24 + self.rays * 24 + 16 * SPLAT_BLOCK * self.table_width
         budget = SCRATCH_SHARE * device.global_mem_size
         wanted = (CPU_SLOTS_PER_CORE if cpu else GPU_SLOTS_PER_UNIT) * device.max_compute_units
         self.slots = max(1, min(int(wanted), int(budget // slot_bytes)))
@@ -207,7 +214,7 @@ class DeviceImager:
             cl.Buffer(context, rw, size=self.slots * area * 16),
             cl.Buffer(context, rw, size=self.slots * self.rays * 16),
             cl.Buffer(context, rw, size=self.slots * self.rays * 8),
-            cl.Buffer(context, rw, size=self.slots * 2 * self.table_width * 8),
+            cl.Buffer(context, rw, size=self.slots * 2 * SPLAT_BLOCK * self.table_width * 8),
         ]
         self.counter = cl.Buffer(context, rw, size=4)
         self.rows_l = cl.Buffer(context, rw, size=self.max_tracers * _ROW_LONGS * 8)
