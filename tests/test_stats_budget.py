@@ -63,6 +63,16 @@ def test_verdict_names_the_dominant_part(budget_case):
     assert budget_verdict(quiet)["dominant"] == "baseline"
 
 
+def test_verdict_says_whether_images_change_size(budget_case):
+    """The typical image keeping its size (ΔA/A peak 0) does not hide a tenth that grows."""
+    case, _ = budget_case
+    reshaped = {**case, "area_change_peak": 0.0, "area_change_p90": 0.84}
+    assert "images change size (|ΔA/A| 90th percentile 0.84)" in (budget_verdict(reshaped)["text"])
+    kept = {**case, "area_change_peak": 0.0, "area_change_p90": 0.001}
+    assert "keep their size" in budget_verdict(kept)["text"]
+    assert case["area_change_p90"] is not None
+
+
 def test_fit_groups_have_the_shape_of_the_differences_and_their_errors(budget_case):
     case, injected = budget_case
     for group, symbol in (("velocity_fit", "u"), ("acceleration_fit", "a")):
