@@ -609,17 +609,19 @@ class _RaySampler:
         )
 
     def table(self, rays_per_tracer):
-        names = (
-            "ray",
-            "theta0",
-            "deflection",
-            "n_metric",
-            "path_length",
-            "displacement",
-            "status",
-            "collected",
-        )
-        table = {name: np.concatenate([p[name] for p in self.parts]) for name in names}
+        """The kept rays, one column per name (empty columns when none was kept)."""
+        empty = {
+            "ray": np.int64,
+            "theta0": np.float64,
+            "deflection": np.float64,
+            "n_metric": np.float64,
+            "path_length": np.float64,
+            "displacement": np.float64,
+            "status": np.int8,
+            "collected": bool,
+        }
+        parts = self.parts or [{name: np.zeros(0, kind) for name, kind in empty.items()}]
+        table = {name: np.concatenate([p[name] for p in parts]) for name in empty}
         table["tracer_id"] = table["ray"] // rays_per_tracer
         return table
 

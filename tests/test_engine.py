@@ -286,3 +286,12 @@ def test_blocks_of_sources_add_the_same_light_as_one_source_at_a_time(device, ki
         # peak: the raw image's brightest pixel times the scale given
         for name in ("peak", "x2_opt", "x2", "x3", "area", "flags"):
             np.testing.assert_array_equal(columns[block][name], columns[1][name], err_msg=name)
+
+
+def test_no_ray_sample_gives_empty_ray_tables_on_both_engines(device):
+    """run.ray_sample = 0: the device engine never hands its sampler a batch."""
+    options = {**SAMPLE, "device": device, "frames": 1, "ray_sample": 0}
+    tables = [_render(engine, "C1", **options).rays for engine in ("numpy", "device")]
+    for numpy_column, device_column in zip(tables[0].values(), tables[1].values(), strict=True):
+        assert len(device_column) == 0 and device_column.dtype == numpy_column.dtype
+    assert tables[0].keys() == tables[1].keys()
