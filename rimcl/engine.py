@@ -99,6 +99,9 @@ SCRATCH_SHARE = 0.25
 #: Rays per batch up to which batches are enlarged to fill the image slots (about 700 MB of
 #: device memory for the rays' image points, steps and codes).
 MAX_BATCH_RAYS = 1 << 25
+#: Rays per batch below which batches are enlarged (about 30 MB of device memory): the host
+#: work per batch (about 1 ms of Python) then costs a few µs per tracer image, not 100.
+MIN_BATCH_RAYS = 1 << 20
 
 
 def _perimeter_weights():
@@ -151,8 +154,9 @@ class DeviceImager:
     rays_per_tracer : int
         ``K``, rays of each tracer.
     max_tracers : int
-        Largest batch (raised to the number of scratch slots, at most :data:`MAX_BATCH_RAYS`
-        rays: a GPU needs thousands of tracer images in flight).
+        Largest batch (raised to the number of scratch slots and to
+        :data:`MIN_BATCH_RAYS` rays, at most :data:`MAX_BATCH_RAYS` rays: a GPU needs
+        thousands of tracer images in flight).
     device : pyopencl.Device
     queue : pyopencl.CommandQueue
         An in-order queue with profiling.
@@ -207,7 +211,9 @@ class DeviceImager:
         self.slots = max(1, min(int(wanted), int(budget // slot_bytes)))
         if not cpu:
             self.slots = max(self.group, self.slots // self.group * self.group)
-        fill = min(self.slots, max(1, MAX_BATCH_RAYS // self.rays))
+        fill = min(
+            max(self.slots, MIN_BATCH_RAYS // self.rays), max(1, MAX_BATCH_RAYS // self.rays)
+        )
         self.max_tracers = max(int(max_tracers), fill)
         self.scratch = [
             cl.Buffer(context, rw, size=self.slots * (area + 8) * 8),

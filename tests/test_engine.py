@@ -295,3 +295,23 @@ def test_no_ray_sample_gives_empty_ray_tables_on_both_engines(device):
     for numpy_column, device_column in zip(tables[0].values(), tables[1].values(), strict=True):
         assert len(device_column) == 0 and device_column.dtype == numpy_column.dtype
     assert tables[0].keys() == tables[1].keys()
+
+
+def test_several_batches_per_frame_match_the_numpy_engine(device, monkeypatch):
+    """Batches double-buffered within a frame (the ray sample, noise keys and rows of
+    each batch at their tracers): the same result as one batch and as NumPy."""
+    import rimcl.engine
+
+    options = {**SAMPLE, "device": device, "frames": 2, "ray_sample": 300, "camera": "pupil"}
+    one_batch = _render("device", "C3", **options)
+    monkeypatch.setattr(rimcl.engine, "MIN_BATCH_RAYS", 0)
+    monkeypatch.setattr(rimcl.engine, "CPU_SLOTS_PER_CORE", 1)
+    monkeypatch.setattr(rimcl.engine, "GPU_SLOTS_PER_UNIT", 1)
+    split = MeasureConfig.from_options(
+        engine="device", frame_image=True, rays_per_batch=64, **options
+    )
+    several = run_render(None, case="C3", config=split)
+    assert several.config["engine"] == "device"
+    assert_engines_agree(_render("numpy", "C3", **options), several)
+    for name, values in one_batch.tracers.items():
+        np.testing.assert_array_equal(several.tracers[name], values, err_msg=name)
