@@ -285,7 +285,10 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
             }
             const int outside = (end[1] < box23.x) | (end[1] > box23.y) | (end[2] < box23.z) |
                                 (end[2] > box23.w);
-            status = (run_x > max_length) ? RAY_MAX_STEPS : RAY_OK;
+            const int finite = isfinite(end[0]) && isfinite(end[1]) && isfinite(end[2]) &&
+                               isfinite(dir[0]) && isfinite(dir[1]) && isfinite(dir[2]);
+            status = finite ? RAY_OK : RAY_NON_FINITE;
+            status = (run_x > max_length) ? RAY_MAX_STEPS : status;
             status = outside ? RAY_EXIT_SIDE : status;
             status = (!(run_x > 0.0) || isinf(run_x)) ? RAY_TURNED_BACK : status;
         }

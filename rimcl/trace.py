@@ -925,6 +925,8 @@ def straight_rays(field, origins, directions, *, x_end, max_length=np.inf):
     status = np.zeros(len(origins), dtype=np.int8)
     lateral = end_pos[:, 1:]
     outside = np.any(lateral < field.box_lo[1:], axis=1) | np.any(lateral > field.box_hi[1:], 1)
+    finite = np.all(np.isfinite(end_pos), axis=1) & np.all(np.isfinite(end_dir), axis=1)
+    status[~finite] = STATUS_NAMES.index("non_finite")  # never ok (see _finish)
     status[run > max_length] = STATUS_NAMES.index("max_steps")
     status[outside] = STATUS_NAMES.index("exit_side")
     status[~(run > 0) | ~np.isfinite(run)] = STATUS_NAMES.index("turned_back")

@@ -316,3 +316,16 @@ def test_straight_rays_are_what_the_integrator_traces_in_a_uniform_field(device,
     np.testing.assert_allclose(straight.image_pos[ok], origins[ok], rtol=0, atol=1e-15)
     assert np.all(straight.steps == 0) and np.all(straight.n_metric == 0)
     np.testing.assert_allclose(straight.path_length[ok], traced.path_length[ok], rtol=1e-6)
+
+
+def test_a_straight_ray_whose_exit_overflows_is_non_finite_never_ok():
+    from rimcl.trace import STATUS_NAMES, straight_rays
+
+    field = rimcl.Field.from_arrays(
+        np.zeros((4, 4, 4), dtype=np.float32), spacing=(0.1, 0.1, 0.1), boundary="periodic"
+    )
+    origins = np.array([[0.0, 1.7e308, 0.0], [0.0, 0.0, 0.0]])
+    directions = np.array([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0]])
+    result = straight_rays(field, origins, directions, x_end=1e308)
+    assert [STATUS_NAMES[s] for s in result.status] == ["non_finite", "ok"]
+    assert np.isnan(result.image_pos[0]).all() and np.isfinite(result.image_pos[1]).all()
