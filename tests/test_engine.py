@@ -15,7 +15,7 @@ import pytest
 
 from rimcl.centroid import TracerFlag
 from rimcl.config import MeasureConfig, MieConfig
-from rimcl.engine import image_points
+from rimcl.device_imaging import image_points
 from rimcl.errors import RimclError
 from rimcl.imaging import Imaging, image_batch
 from rimcl.measure import run_render
@@ -263,15 +263,15 @@ def test_blocks_of_sources_add_the_same_light_as_one_source_at_a_time(device, ki
     """The image kernel adds RIMCL_SPLAT_BLOCK sources per pass over a window: every
     pixel's sum keeps the source order, so the raw images (their peaks and light) are
     those of one source at a time to the last bit."""
-    import rimcl.engine
+    import rimcl.device_imaging
 
     points, usable = _clouds(np.random.default_rng(11))
     weights = np.random.default_rng(12).uniform(0.5, 1.5, size=usable.shape)
     imaging = _imaging(kind, 16, "grey")
     flags = np.zeros(len(points), dtype=np.int64)
     columns = {}
-    for block in (1, 3, rimcl.engine.SPLAT_BLOCK):
-        monkeypatch.setattr(rimcl.engine, "SPLAT_BLOCK", block)
+    for block in (1, 3, rimcl.device_imaging.SPLAT_BLOCK):
+        monkeypatch.setattr(rimcl.device_imaging, "SPLAT_BLOCK", block)
         columns[block] = image_points(
             imaging,
             points,
@@ -300,13 +300,13 @@ def test_no_ray_sample_gives_empty_ray_tables_on_both_engines(device):
 def test_several_batches_per_frame_match_the_numpy_engine(device, monkeypatch):
     """Batches double-buffered within a frame (the ray sample, noise keys and rows of
     each batch at their tracers): the same result as one batch and as NumPy."""
-    import rimcl.engine
+    import rimcl.device_imaging
 
     options = {**SAMPLE, "device": device, "frames": 2, "ray_sample": 300, "camera": "pupil"}
     one_batch = _render("device", "C3", **options)
-    monkeypatch.setattr(rimcl.engine, "MIN_BATCH_RAYS", 0)
-    monkeypatch.setattr(rimcl.engine, "CPU_SLOTS_PER_CORE", 1)
-    monkeypatch.setattr(rimcl.engine, "GPU_SLOTS_PER_UNIT", 1)
+    monkeypatch.setattr(rimcl.device_imaging, "MIN_BATCH_RAYS", 0)
+    monkeypatch.setattr(rimcl.device_imaging, "CPU_SLOTS_PER_CORE", 1)
+    monkeypatch.setattr(rimcl.device_imaging, "GPU_SLOTS_PER_UNIT", 1)
     split = MeasureConfig.from_options(
         engine="device", frame_image=True, rays_per_batch=64, **options
     )

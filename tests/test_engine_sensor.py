@@ -17,7 +17,7 @@ from test_engine import PIXEL, SAMPLE, _assert_same, _clouds, assert_engines_agr
 
 from rimcl.centroid import TracerFlag
 from rimcl.config import MeasureConfig, SensorConfig
-from rimcl.engine import image_points
+from rimcl.device_imaging import image_points
 from rimcl.errors import RimclError
 from rimcl.imaging import Imaging, image_batch
 from rimcl.measure import run_render
