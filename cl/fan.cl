@@ -90,8 +90,8 @@ RIMCL_INLINE double norm3(double a, double b, double c)
 #if RIMCL_CAMERA == 2
 /* The unit direction from the tracer (x2, x3) = start to the pupil point `aim` through the
  * fluid, the glass and the outside medium, as LensCamera.directions solves it (Newton on
- * the sine of the angle to x1, from the paraxial guess, its operations in its order),
- * then normalised as trace_rays does. */
+ * the sine of the angle to x1, from the paraxial guess, its operations in its order);
+ * trace_fan then normalises it as trace_rays does (normalise3). */
 RIMCL_INLINE void window_direction(__constant const double *camera, const double start2,
                                    const double start3, __global const double *aim, double *d)
 {
