@@ -205,7 +205,30 @@ def velocity_table(vectors, pixel_size, dt):
     return table
 
 
-def vector_errors(table, measured, reference):
+def window_blocks(shape, overlap):
+    """Bootstrap groups of a vector grid: blocks of ``k x k`` neighbouring vectors, ``k``
+    the number of grid steps one window spans (2 at 50 % overlap), so that vectors whose
+    windows share pixels are mostly resampled together.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        ``(rows, columns)`` of the vector grid.
+    overlap : float
+        Window overlap, fraction in ``[0, 1)``.
+
+    Returns
+    -------
+    ids : ndarray of int, shape ``shape``
+        The block of each vector.
+    k : int
+    """
+    k = max(1, math.ceil(1.0 / (1.0 - overlap) - 1e-9))
+    rows, columns = np.indices(shape)
+    return (rows // k) * -(-shape[1] // k) + columns // k, k
+
+
+def vector_errors(table, measured, reference, ids=None):
     """Relative-error summaries of the velocity: ``u2``, ``u3``, magnitude and angle.
 
     The PIV counterpart of the PTV velocity block of :mod:`rimcl.stats` (same keys and
@@ -218,6 +241,8 @@ def vector_errors(table, measured, reference):
     measured, reference : str
         Suffixes of the columns compared (``meas``, ``opt``, ``ref`` or ``true``); the
         truth (denominator) is always the ``true`` column.
+    ids : ndarray of int, optional
+        Bootstrap group of each vector (:func:`window_blocks`); default: each its own.
 
     Returns
     -------
@@ -227,9 +252,9 @@ def vector_errors(table, measured, reference):
     true, meas, ref = ((table[f"u2_{k}"], table[f"u3_{k}"]) for k in ("true", measured, reference))
     angles = angle_deg(meas, ref)
     return {
-        "u2": error_summary(meas[0] - ref[0], true[0]),
-        "u3": error_summary(meas[1] - ref[1], true[1]),
-        "magnitude": error_summary(np.hypot(*meas) - np.hypot(*ref), np.hypot(*true)),
+        "u2": error_summary(meas[0] - ref[0], true[0], ids),
+        "u3": error_summary(meas[1] - ref[1], true[1], ids),
+        "magnitude": error_summary(np.hypot(*meas) - np.hypot(*ref), np.hypot(*true), ids),
         "angle_deg_median": float(np.median(angles)) if angles.size else None,
     }
 
@@ -258,7 +283,9 @@ def case_statistics(render, vectors, settings):
         ``u2, u3, magnitude`` error summaries and ``angle_deg_median``), ``optics`` (the
         optics part, same shape), ``baseline`` (``{"velocity": ...}``, ``u^ref - u``),
         ``displacement_px`` (rms and largest per-vector errors in pixels, by part),
-        ``rays`` (status counts per medium), ``piv`` (settings).
+        ``rays`` (status counts per medium), ``piv`` (settings); the intervals resample
+        blocks of ``bootstrap_block_vectors`` x ``bootstrap_block_vectors`` neighbouring
+        vectors together (:func:`window_blocks`: overlapping windows share pixels).
     """
     used = vectors["used"]
     table = velocity_table(vectors, render.pixel_size, render.dt)
@@ -275,6 +302,8 @@ def case_statistics(render, vectors, settings):
     )[used]
     truth = np.hypot(vectors["dx_true"], vectors["dy_true"])[used]
     length = render.scene.depth
+    blocks, block_side = window_blocks(used.shape, settings.overlap)
+    ids = blocks[used]
     return {
         "name": render.case,
         "G": render.k_rho if math.isfinite(render.k_rho) else None,  # fluid cases: none
@@ -291,9 +320,10 @@ def case_statistics(render, vectors, settings):
             "outlier_uniform": int(np.count_nonzero(~vectors["valid_uniform"])),
             "no_tracers": int(np.count_nonzero(vectors["truth_tracers"] == 0)),
         },
-        "velocity": vector_errors(table, "meas", "ref"),
-        "optics": vector_errors(table, "opt", "ref"),
-        "baseline": {"velocity": vector_errors(table, "ref", "true")},
+        "velocity": vector_errors(table, "meas", "ref", ids),
+        "optics": vector_errors(table, "opt", "ref", ids),
+        "baseline": {"velocity": vector_errors(table, "ref", "true", ids)},
+        "bootstrap_block_vectors": block_side,
         "displacement_px": {
             "truth_rms": _rms(truth),
             "refraction_rms": _rms(refraction),

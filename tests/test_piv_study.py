@@ -3,6 +3,7 @@
 import json
 
 import h5py
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -122,3 +123,40 @@ def test_verdict_names_the_cases_that_agree_and_those_that_differ():
     assert "**differ** in C3 (3.0), C4 (0.25)" in line
     assert "optics parts (rays only) **agree** within a factor 2 in every case" in line
     assert piv_verdict({"cases": [{"name": "C1"}]}).startswith("No PTV case")
+
+
+def test_window_blocks_group_the_vectors_one_window_spans():
+    from rimcl.piv_study import window_blocks
+
+    ids, k = window_blocks((5, 7), 0.5)
+    assert k == 2 and ids.shape == (5, 7)
+    assert ids[0, 0] == ids[1, 1] == ids[0, 1] and ids[0, 0] != ids[0, 2] != ids[2, 2]
+    assert len(np.unique(ids)) == 3 * 4
+    assert (
+        window_blocks((4, 4), 0.0)[1] == 1 and len(np.unique(window_blocks((4, 4), 0.0)[0])) == 16
+    )
+    assert window_blocks((4, 4), 0.75)[1] == 4
+
+
+def test_vectors_of_overlapping_windows_are_resampled_together():
+    """Errors shared by the 2 x 2 vectors of each block (as overlapping windows share
+    pixels): resampling vectors one by one would make the interval half as wide."""
+    from rimcl.piv_study import vector_errors, window_blocks
+
+    rng = np.random.default_rng(3)
+    ids, _ = window_blocks((40, 40), 0.5)
+    block_error = rng.normal(size=ids.max() + 1)
+    error = block_error[ids].ravel() + 1e-3 * rng.normal(size=ids.size)
+    table = {
+        "u2_true": np.ones(ids.size),
+        "u3_true": np.ones(ids.size),
+        "u2_meas": 1 + error,
+        "u3_meas": 1 + error,
+        "u2_ref": np.ones(ids.size),
+        "u3_ref": np.ones(ids.size),
+    }
+    width = {}
+    for name, groups in (("blocks", ids.ravel()), ("vectors", None)):
+        low, high = vector_errors(table, "meas", "ref", groups)["u2"]["ci95"]["systematic"]
+        width[name] = high - low
+    assert 1.7 < width["blocks"] / width["vectors"] < 2.4
