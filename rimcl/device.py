@@ -153,13 +153,18 @@ def _match(spec, found):
     raise RimclError(f"no OpenCL device matches {spec!r}; see 'rimcl devices' for the list")
 
 
-def select_device(spec=None):
+def select_device(spec=None, need_fp64=False):
     """Choose an OpenCL device without asking.
+
+    Without a spec (nor ``$RIMCL_DEVICE``): the first usable GPU, then CPU; with
+    ``need_fp64`` (the device engine) the first usable GPU, then CPU, with ``cl_khr_fp64``
+    comes first (a laptop's integrated GPU often lacks it).
 
     Parameters
     ----------
     spec : str or pyopencl.Device, optional
         ``"pocl"``, ``"nvidia"``, ``"0:1"``... A device object is returned unchanged.
+    need_fp64 : bool
 
     Returns
     -------
@@ -179,10 +184,11 @@ def select_device(spec=None):
             device = _match(str(spec), _usable(found))
         return device
     found = _usable(found)
-    for wanted in (cl.device_type.GPU, cl.device_type.CPU):
-        for _, _, device in found:
-            if device.type & wanted:
-                return device
+    for fp64 in (True, False) if need_fp64 else (False,):
+        for wanted in (cl.device_type.GPU, cl.device_type.CPU):
+            for _, _, device in found:
+                if device.type & wanted and (has_fp64(device) or not fp64):
+                    return device
     return found[0][2]
 
 

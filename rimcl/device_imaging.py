@@ -445,7 +445,7 @@ def image_points(
 
     from rimcl.device import context_for, select_device
 
-    device = select_device(device)
+    device = select_device(device, need_fp64=True)
     count, rays = usable.shape
     first_id = None
     if noise is not None:

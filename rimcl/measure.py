@@ -404,7 +404,7 @@ def _setup(source, source_name, case_index, config, streams, shard):
     sensor = config.sensor.build(config.renderer.bit_depth, config.tracers.seed)
     imaging = config.renderer.build(scene, camera, sensor)
     mie = config.mie.build(config.fluid.build())
-    device = select_device(config.run.device)
+    device = select_device(config.run.device, need_fp64=config.run.engine == "device")
     _check_memory(source, source_name, config, camera, imaging, device, len(frame_ids))
     every_tracer = seed_tracers(
         config.tracers.count,

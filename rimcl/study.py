@@ -332,7 +332,9 @@ def _check_resources(scene):
         pixels=renderer["pixels"],
         psf_sigma=renderer["psf_sigma"] or DEFAULT_PSF_SIGMA,
         interp=scene["integrator"]["interp"],
-        device=select_device(scene["run"]["device"] or None),
+        device=select_device(
+            scene["run"]["device"] or None, need_fp64=scene["run"]["engine"] == "device"
+        ),
     )
 
 

@@ -45,3 +45,28 @@ def test_device_description_lists_what_users_need(device):
         assert key in info
     assert info["usable"] is True
     assert sum(entry["default"] for entry in list_devices()) == 1
+
+
+class _FakeDevice:
+    def __init__(self, name, kind, fp64):
+        import pyopencl as cl
+
+        self.name = name
+        self.type = cl.device_type.GPU if kind == "gpu" else cl.device_type.CPU
+        self.extensions = "cl_khr_fp64" if fp64 else "cl_khr_global_int32_base_atomics"
+
+
+def test_the_device_engine_prefers_a_device_with_fp64(monkeypatch):
+    """A laptop's integrated GPU without fp64 is the default device, but not the device
+    engine's: it takes the first device with fp64 (here the CPU)."""
+    import rimcl.device
+
+    igpu, cpu = _FakeDevice("igpu", "gpu", False), _FakeDevice("pocl", "cpu", True)
+    found = [(0, 0, igpu), (1, 0, cpu)]
+    monkeypatch.delenv("RIMCL_DEVICE", raising=False)
+    monkeypatch.setattr(rimcl.device, "_all_devices", lambda: found)
+    monkeypatch.setattr(rimcl.device, "_usable", lambda devices: devices)
+    assert rimcl.device.select_device() is igpu
+    assert rimcl.device.select_device(need_fp64=True) is cpu
+    found[1] = (1, 0, _FakeDevice("old", "cpu", False))
+    assert rimcl.device.select_device(need_fp64=True) is igpu  # none has it: the usual order
