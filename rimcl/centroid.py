@@ -127,13 +127,25 @@ def locate(counts, threshold, weights="excess"):
         or cols.max() == counts.shape[1] - 1
     ):
         flags |= TracerFlag.TOUCHES_EDGE
-    w = weight[rows, cols]
-    total = w.sum()
     area = int(rows.size)
+    # sums of integer grey values times (2 index + 1) are exact; the threshold is subtracted
+    # once per sum, so the centroid is the device engine's (rimcl.device_imaging) to the
+    # last bit whatever the threshold
+    grey = counts[rows, cols].astype(np.float64)
+    twice_col, twice_row = 2.0 * cols + 1.0, 2.0 * rows + 1.0
+    total, moment_col, moment_row = (
+        float(grey.sum()),
+        float(grey @ twice_col),
+        float(grey @ twice_row),
+    )
+    if weights == "excess":
+        total = total - threshold * area
+        moment_col = moment_col - threshold * float(twice_col.sum())
+        moment_row = moment_row - threshold * float(twice_row.sum())
     boundary = float(perimeter(mask, neighborhood=4))
     return Blob(
-        col=float((cols + 0.5) @ w / total),
-        row=float((rows + 0.5) @ w / total),
+        col=moment_col / 2 / total,
+        row=moment_row / 2 / total,
         area=area,
         perimeter=boundary,
         circularity=boundary**2 / (4 * np.pi * area),

@@ -162,6 +162,7 @@ SAMPLE = {"tracers": 10, "fan": 8, "pupil_rays": 64, "pixels": 1024, "psf_sigma"
         ("C0", {"camera": "plane", "renderer": "exact", "bit_depth": 10}),
         ("C1", {"camera": "pupil", "renderer": "paper", "bit_depth": 16}),
         ("C2", {"camera": "plane", "renderer": "paper", "centroid_weights": "grey"}),
+        ("C2", {"camera": "pupil", "renderer": "exact", "threshold": 33.3, "bit_depth": 12}),
         ("C3", {"camera": "pupil", "renderer": "exact", "bit_depth": 16, "view_angle": 20.0}),
         ("C4", {"camera": "plane", "renderer": "exact", "max_window": 24, "bit_depth": 12}),
         ("C4", {"camera": "pupil", "renderer": "paper", "aperture_diameter": 1.0}),
