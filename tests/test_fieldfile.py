@@ -235,7 +235,7 @@ def test_reader_errors_are_clear(tmp_path):
 def test_shipped_sample_is_a_periodic_64_cube_with_velocity():
     with FieldFile(sample_path()) as ff:
         assert ff.shape == (64, 64, 64) and ff.boundary == "periodic"
-        assert ff.n_frames == 21 and ff.has_velocity and not ff.has_density_gradient
+        assert ff.n_frames == 13 and ff.has_velocity and not ff.has_density_gradient
         np.testing.assert_allclose(np.diff(ff.times), 0.02, rtol=1e-9)
         np.testing.assert_allclose(ff.spacing, 2 * np.pi / 64)
         assert ff.sheet_velocity(ff.times[0] + 0.002, 0.0).shape == (64, 64, 2)

@@ -189,7 +189,7 @@ def test_a_failed_scene_does_not_lock_the_directory(device, tmp_path):
     with pytest.raises(RimclError, match=r"the sheet|depth"):
         run_study(outside, out, figures=False)
     assert not out.exists()  # refused before anything was written
-    late = tiny(device, **{"field.start_frame": 19, "cases.names": ["C1"]})
+    late = tiny(device, **{"field.start_frame": 11, "cases.names": ["C1"]})
     with pytest.raises(RimclError, match="need the field up to"):
         run_study(late, out, figures=False)
     assert not (out / "scene.toml").exists()
