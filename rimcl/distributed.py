@@ -126,8 +126,8 @@ def _read_reference(group):
 
 def scene_stamp(scene):
     """What a shard file must have been measured for: the scene without the keys that do
-    not change the numbers (:data:`rimcl.study.RUN_ONLY_KEYS`), as JSON text."""
-    from rimcl.study import comparable_scene
+    not change the numbers (:data:`rimcl.case_files.RUN_ONLY_KEYS`), as JSON text."""
+    from rimcl.case_files import comparable_scene
 
     return json.dumps(comparable_scene(scene), sort_keys=True)
 
@@ -400,8 +400,8 @@ def measure_shard(plugin, scene, case, shard, path, reference_path=None, wait_fo
         ``path``, ``seconds`` (wall time on the worker), ``measured`` (False if the file
         was there).
     """
+    from rimcl.case_files import SCENE_RECORD, comparable_scene
     from rimcl.measure import run_render
-    from rimcl.study import SCENE_RECORD, comparable_scene
 
     start = time.perf_counter()
     if Path(path).exists():
@@ -553,7 +553,7 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
     seconds : dict of str to float
         Worker time of each case merged in this run (s), summed over its shards.
     """
-    from rimcl.study import case_path, check_case_file
+    from rimcl.case_files import case_path, check_case_file
 
     parse_scheduler(scheduler)  # a bad spec or a missing Dask, before anything is touched
     _import_distributed(scheduler)

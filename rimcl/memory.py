@@ -336,7 +336,8 @@ def rays_per_tracer(camera, fan, pupil_rays):
 
 
 def check_render_request(
-    field,
+    shape,
+    where,
     *,
     tracers,
     camera="plane",
@@ -353,26 +354,22 @@ def check_render_request(
 ):
     """Refuse, before any work, a render run that cannot fit in host or device memory.
 
-    Checks the field frame (read from the file's metadata), the tracer tables, one ray
+    Checks the field frame (its shape from the file's metadata), the tracer tables, one ray
     batch and the images on the host, and the field upload on ``device``.
 
     Parameters
     ----------
-    field : str, Path or None
-        Field file (None: the shipped sample).
+    shape : tuple of int
+        Nodes of a field frame, ``(n3, n2, n1)`` (from the file's metadata).
+    where : str
+        The field, for the messages (e.g. its path).
     tracers, camera, fan, pupil_rays, rays_per_batch, frames, max_window, pixels, \
 psf_sigma, frame_image, interp
         As :func:`rimcl.measure.run_render`.
     device : pyopencl.Device, optional
         Also check the field upload to this device.
     """
-    from rimcl.flow import sample_path
-    from rimcl.flow.fieldfile import FieldFile
-
-    path = sample_path() if field is None else field
-    with FieldFile(path) as source:
-        shape = source.shape
-    check_field_memory(shape, f"a frame of {path}")
+    check_field_memory(shape, f"a frame of {where}")
     check_render_memory(
         tracers,
         rays_per_tracer(camera, fan, pupil_rays),
@@ -384,4 +381,4 @@ psf_sigma, frame_image, interp
         frame_image,
     )
     if device is not None:
-        check_field_upload(shape, device, interp, f"the field of {path}")
+        check_field_upload(shape, device, interp, f"the field of {where}")

@@ -632,7 +632,7 @@ def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None):
     return paths, ran
 
 
-def add_study_results(stats, paths, figures_dir=None, config=None):
+def add_study_results(stats, paths):
     """Put the PIV results of a study's case files into its ``stats.json`` document.
 
     Each case entry gains ``piv`` (:func:`case_statistics`) and, where the PTV case ran,
@@ -645,15 +645,12 @@ def add_study_results(stats, paths, figures_dir=None, config=None):
         The ``stats.json`` document (``cases`` may be empty); changed in place.
     paths : list of Path
         PIV case files (:func:`write_piv_case`).
-    figures_dir : Path, optional
-        Where to draw the PIV figures (:func:`rimcl.piv_figures.write_piv_figures`).
-    config : dict, optional
-        Recorded in each figure's JSON.
 
     Returns
     -------
-    dict
-        ``stats``.
+    list of (dict, dict)
+        The loaded cases (vectors, statistics), for
+        :func:`rimcl.piv_figures.write_piv_figures`.
     """
     cases = [load_piv_case(path) for path in paths]
     entries = {entry["name"]: entry for entry in stats["cases"]}
@@ -665,8 +662,4 @@ def add_study_results(stats, paths, figures_dir=None, config=None):
         entry["piv"] = piv_stats
         if "velocity" in entry:
             entry["piv_vs_ptv"] = agreement_with_ptv(piv_stats, entry)
-    if figures_dir is not None:
-        from rimcl.piv_figures import write_piv_figures
-
-        write_piv_figures(cases, figures_dir, config=config, overwrite=True)
-    return stats
+    return cases

@@ -41,26 +41,21 @@ import time
 from pathlib import Path
 
 from rimcl import __version__
+from rimcl.case_files import (
+    SCENE_RECORD,
+    case_path,
+    check_case_file,
+    comparable_scene,
+    scene_differences,
+)
 from rimcl.config import DEFAULT_PSF_SIGMA, MeasureConfig
-from rimcl.errors import RimclError, first_line
+from rimcl.errors import RimclError
 from rimcl.provenance import atomic_path
 from rimcl.scene import load_scene, scene_text
 from rimcl.summary import summary_markdown
 
-#: Scene keys that do not change the measurement: a study may resume with other values.
-RUN_ONLY_KEYS = (
-    ("run", "numerics"),
-    ("run", "device"),
-    ("run", "rays_per_batch"),
-    ("run", "mode"),
-    ("run", "scheduler"),
-    ("run", "shard_tracers"),
-    ("run", "engine"),
-)
 #: File that marks a directory as a rimcl study (and is locked while a study runs in it).
 MARKER = ".rimcl-study"
-#: Key of a case file's recorded configuration holding the study's scene.
-SCENE_RECORD = "study_scene"
 #: Name of the one case of a field file that stores δn (its own refractive index).
 DELTA_N_CASE = "delta_n"
 #: Frames every study case images (positions, velocity, acceleration).
@@ -95,22 +90,6 @@ class StudyResult:
     wall_seconds: float
 
 
-def comparable_scene(scene):
-    trimmed = json.loads(json.dumps(scene))
-    for section, name in RUN_ONLY_KEYS:
-        trimmed.get(section, {}).pop(name, None)
-    return trimmed
-
-
-def _differences(old, new):
-    return [
-        f"{section}.{name}: {old.get(section, {}).get(name)!r} -> {value!r}"
-        for section, table in new.items()
-        for name, value in table.items()
-        if old.get(section, {}).get(name) != value
-    ]
-
-
 def _read_scene_file(scene_path):
     """The scene recorded in a study directory; a damaged file is one line of error."""
     try:
@@ -128,7 +107,7 @@ def _check_directory(out_dir, scene, force):
         return
     if scene_path.exists():
         previous = comparable_scene(_read_scene_file(scene_path))
-        changes = _differences(previous, comparable_scene(scene))
+        changes = scene_differences(previous, comparable_scene(scene))
         if changes:
             raise RimclError(
                 f"{out_dir} holds a study of another scene ({'; '.join(changes)}); "
@@ -200,11 +179,6 @@ def _write_text(path, text):
         Path(tmp).write_text(text)
 
 
-def case_path(out_dir, case):
-    """Render file of one case in a study directory."""
-    return Path(out_dir) / "cases" / f"{case}.h5"
-
-
 def study_cases(scene):
     """The cases a study of ``scene`` measures: ``(name, case argument)`` pairs.
 
@@ -221,66 +195,6 @@ def study_cases(scene):
     if field_kind(scene["field"]["path"] or sample_path()) == "delta_n":
         return [(DELTA_N_CASE, None)]
     return [(name, name) for name in scene["cases"]["names"]]
-
-
-def check_case_file(path, scene, case):
-    """Why a study's case file cannot be kept for ``scene``, or None if it can.
-
-    A case file is kept only if it is a readable render file of ``case`` with every group
-    and the row counts of the scene's tracers, and its recorded scene equals ``scene``
-    in every key that changes the measurement (:data:`RUN_ONLY_KEYS` may differ).
-
-    Parameters
-    ----------
-    path : str or Path
-    scene : dict
-        A complete scene.
-    case : str
-        The case name the file must hold.
-
-    Returns
-    -------
-    str or None
-        One line saying why the file must be measured again.
-    """
-    from rimcl.stats import load_render
-
-    path = Path(path)
-    try:
-        tables = load_render(path)
-    except RimclError as exc:
-        return f"unreadable or incomplete ({exc})"
-    except Exception as exc:  # whatever h5py raises for a damaged file
-        return f"damaged ({type(exc).__name__}: {first_line(exc)})"
-    if tables.case != case:
-        return f"holds case {tables.case!r}, not {case!r}"
-    recorded = tables.provenance.get("config", {}).get(SCENE_RECORD)
-    if not isinstance(recorded, dict):
-        return "records no study scene (written by rimcl render or an older rimcl)"
-    changes = _differences(recorded, comparable_scene(scene))
-    if changes:
-        shown = "; ".join(changes[:3]) + ("; ..." if len(changes) > 3 else "")
-        return f"made for another scene ({shown})"
-    for group, wanted in expected_rows(scene).items():
-        table = getattr(tables, group) or {}
-        found = len(table["id"]) if "id" in table else 0
-        if found != wanted:
-            return f"incomplete ({group} has {found} rows, the scene needs {wanted})"
-    return None
-
-
-def expected_rows(scene):
-    """Rows of each table of a complete case file of ``scene`` (0: no such table)."""
-    count, frames = scene["tracers"]["count"], scene["time"]["frames"]
-    window = scene["time"]["fit_window"]
-    fitted = count * (frames - window + 1) if frames >= window else 0
-    return {
-        "tracers": count * frames,
-        "velocity": count * (frames - 1),
-        "acceleration": count * max(frames - 2, 0),
-        "velocity_fit": fitted,
-        "acceleration_fit": fitted,
-    }
 
 
 def _up_to_date(out_dir, case_files, figures, mode="ptv"):
@@ -310,7 +224,8 @@ def _check_resources(scene):
     from rimcl.memory import check_render_request
 
     field = scene["field"]
-    with FieldFile(field["path"] or sample_path()) as source:
+    path = field["path"] or sample_path()
+    with FieldFile(path) as source:
         Scene.from_grid(
             source.origin,
             source.spacing,
@@ -321,7 +236,8 @@ def _check_resources(scene):
         )
     camera, renderer = scene["camera"], scene["renderer"]
     check_render_request(
-        scene["field"]["path"] or None,
+        source.shape,
+        path,
         tracers=scene["tracers"]["count"],
         camera=camera["kind"],
         fan=camera["fan"],
@@ -568,9 +484,12 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
                 else:
                     stats["dt_sweep"] = dt_sweep_data(by_dt)
     if piv_files:
+        from rimcl.piv_figures import write_piv_figures
         from rimcl.piv_study import add_study_results
 
-        add_study_results(stats, piv_files, out_dir / "figures" if figures else None, config)
+        piv_cases = add_study_results(stats, piv_files)
+        if figures:
+            write_piv_figures(piv_cases, out_dir / "figures", config=config, overwrite=True)
     write_json(out_dir / "stats.json", stats, overwrite=True)
     _write_text(out_dir / "summary.md", summary_markdown(stats, scene))
     return stats
