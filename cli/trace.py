@@ -114,7 +114,7 @@ def trace(
     from rimcl.memory import check_field_upload, check_trace_memory
     from rimcl.provenance import check_output
     from rimcl.rays import fan_rays, read_rays, scene_for, write_trace
-    from rimcl.trace import trace_rays
+    from rimcl.tracing import trace_rays
 
     check_output(output, overwrite)
     if analytic is not None:

@@ -16,7 +16,7 @@ _EXPORTS = {
     "Field": "rimcl.field",
     "AnalyticField": "rimcl.field",
     "analytic_field": "rimcl.field",
-    "trace_rays": "rimcl.trace",
+    "trace_rays": "rimcl.tracing",
     "TraceResult": "rimcl.trace",
     "STATUS_NAMES": "rimcl.trace",
     "load_field": "rimcl.flow.fieldfile",

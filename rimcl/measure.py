@@ -43,8 +43,8 @@ from rimcl.trace import (
     default_step,
     straight_path_limit,
     straight_rays,
-    trace_rays,
 )
+from rimcl.tracing import trace_rays
 from rimcl.track import (
     SheetVelocity,
     integrate_tracks,

@@ -72,7 +72,8 @@ from rimcl.flow.crop import CroppedSource
 from rimcl.piv import PivSettings, WindowGrid, write_tiff
 from rimcl.provenance import atomic_path, check_output, stamp_h5
 from rimcl.render import TRUNCATE_SIGMAS, Renderer, quantize
-from rimcl.trace import STATUS_NAMES, trace_rays
+from rimcl.trace import STATUS_NAMES
+from rimcl.tracing import trace_rays
 from rimcl.track import SheetVelocity, integrate_tracks
 
 TRUTH_SCHEMA = "piv_truth"

@@ -12,7 +12,7 @@ import numpy as np
 
 from rimcl.device import has_fp64, select_device
 from rimcl.field import analytic_field
-from rimcl.trace import trace_rays
+from rimcl.tracing import trace_rays
 
 
 def exact_uniform(origins, directions, x_end):

@@ -19,7 +19,8 @@ from rimcl.field import Field
 from rimcl.flow.fieldfile import write_field
 from rimcl.memory import check_field_upload
 from rimcl.rays import read_rays
-from rimcl.trace import STATUS_NAMES, _finish, trace_rays
+from rimcl.trace import STATUS_NAMES, _finish
+from rimcl.tracing import trace_rays
 
 # Address space a refusing process may use: the interpreter, NumPy, h5py and click.
 ADDRESS_SPACE = 1536 * 2**20
