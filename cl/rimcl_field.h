@@ -4,7 +4,8 @@
  * Purpose: field_sample_lanes(p, active, out) -> n, dn/dx1, dn/dx2, dn/dx3 at the
  * positions p (x1, x2, x3) of the active lanes of a work-item (rimcl_real.h), in the
  * working precision `real`. Trilinear sampling finds cells and weights for all lanes in
- * vector registers and blends lane by lane; the other kinds call the one-point
+ * vector registers and blends lane by lane, or with 16 float lanes on PoCL all lanes at
+ * once after a transpose in registers (the same bits); the other kinds call the one-point
  * field_sample(p) per lane. With RIMCL_POCL_FAST, field_prefetch_lanes (trilinear)
  * fetches the cells a step ahead into the cache (RIMCL_FIELD_PREFETCH is then 1).
  * Required defines:
@@ -127,6 +128,82 @@ RIMCL_INLINE real4 lerp4(float4 a, float4 b, real w)
     return low + w * (convert_real4(b) - low);
 }
 
+#if RIMCL_POCL_FAST && RIMCL_PRECISION != RIMCL_F64 && RIMCL_LANES == 16
+/* The nodes of four lanes side by side: (δn, g1, g2, g3) of lane a, then b, c, d. */
+#define NODES4(g, i, a) \
+    __builtin_shufflevector( \
+        __builtin_shufflevector(g[(i)[a]], g[(i)[(a) + 1]], 0, 1, 2, 3, 4, 5, 6, 7), \
+        __builtin_shufflevector(g[(i)[(a) + 2]], g[(i)[(a) + 3]], 0, 1, 2, 3, 4, 5, 6, 7), 0, 1, \
+        2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)
+/* Of the nodes of eight lanes (lanes 0-3 in lo, 4-7 in hi): δn and g1 of the eight lanes
+ * (N_G1), or g2 and g3 (G2_G3). */
+#define N_G1(lo, hi) \
+    __builtin_shufflevector(lo, hi, 0, 4, 8, 12, 16, 20, 24, 28, 1, 5, 9, 13, 17, 21, 25, 29)
+#define G2_G3(lo, hi) \
+    __builtin_shufflevector(lo, hi, 2, 6, 10, 14, 18, 22, 26, 30, 3, 7, 11, 15, 19, 23, 27, 31)
+
+/* The node values of the 16 lanes at node index idx, as one lreal per component: the
+ * lanes' float4 nodes loaded one by one, then transposed in registers (a lane-by-lane
+ * copy into the components doubles the time of the whole trace). */
+RIMCL_INLINE void lanes_nodes(__global const float4 *grid, lint idx, lreal *v)
+{
+    const float16 first = N_G1(NODES4(grid, idx, 0), NODES4(grid, idx, 4));
+    const float16 second = G2_G3(NODES4(grid, idx, 0), NODES4(grid, idx, 4));
+    const float16 first_hi = N_G1(NODES4(grid, idx, 8), NODES4(grid, idx, 12));
+    const float16 second_hi = G2_G3(NODES4(grid, idx, 8), NODES4(grid, idx, 12));
+#define LOWER_HALVES(a, b) \
+    __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22, 23)
+#define UPPER_HALVES(a, b) \
+    __builtin_shufflevector(a, b, 8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27, 28, 29, 30, 31)
+    v[0] = LOWER_HALVES(first, first_hi);
+    v[1] = UPPER_HALVES(first, first_hi);
+    v[2] = LOWER_HALVES(second, second_hi);
+    v[3] = UPPER_HALVES(second, second_hi);
+#undef LOWER_HALVES
+#undef UPPER_HALVES
+}
+#undef NODES4
+#undef N_G1
+#undef G2_G3
+
+/* Trilinear interpolation of the float4 nodes with the 16 lanes in vectors (structure of
+ * arrays; PoCL, float): cells, weights and the blend of all lanes at once, the same
+ * operations in the same order as the lane-by-lane version below, so the same bits.
+ * Measured (2-core AMD EPYC Zen 5, PoCL 3.1): the fan kernel 13 % faster on the 64³
+ * sample, trace_rays 7 % on a 128³ field; at 8 lanes it was 10 % slower than lane by lane.
+ * Inactive lanes load from a cell inside the grid too (lanes_cell_of) and keep their
+ * values in *out (finished rays are frozen). */
+RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample *out)
+{
+    lreal w1, w2, w3;
+    lint up1, up2, up3;
+    const lint base = lanes_cell(FIELD_PASS, p, &w1, &w2, &w3, &up1, &up2, &up3);
+    const real n_ref = PARAM(params, P_NREF);
+    lreal c000[4], c100[4], c010[4], c110[4], c001[4], c101[4], c011[4], c111[4];
+    lanes_nodes(grid, base, c000);
+    lanes_nodes(grid, base + up1, c100);
+    lanes_nodes(grid, base + up2, c010);
+    lanes_nodes(grid, base + up2 + up1, c110);
+    lanes_nodes(grid, base + up3, c001);
+    lanes_nodes(grid, base + up3 + up1, c101);
+    lanes_nodes(grid, base + up3 + up2, c011);
+    lanes_nodes(grid, base + up3 + up2 + up1, c111);
+    lreal s[4];
+#pragma unroll
+    for (int m = 0; m < 4; ++m) {
+        const lreal c00 = c000[m] + w1 * (c100[m] - c000[m]);
+        const lreal c01 = c010[m] + w1 * (c110[m] - c010[m]);
+        const lreal c10 = c001[m] + w1 * (c101[m] - c001[m]);
+        const lreal c11 = c011[m] + w1 * (c111[m] - c011[m]);
+        const lreal c0 = c00 + w2 * (c01 - c00);
+        s[m] = c0 + w3 * (c10 + w2 * (c11 - c10) - c0);
+    }
+    out->n = active ? n_ref + s[0] : out->n;
+    out->g1 = active ? s[1] : out->g1;
+    out->g2 = active ? s[2] : out->g2;
+    out->g3 = active ? s[3] : out->g3;
+}
+#else
 /* Trilinear interpolation of the float4 nodes: the cells and weights of all lanes are
  * found at once in vector registers, the 8 corner loads and the blend lane by lane.
  * Lanes not in `active` keep their values in *out (finished rays are frozen). */
@@ -155,6 +232,7 @@ RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample 
         }
     }
 }
+#endif
 #define RIMCL_LANE_SAMPLER
 
 #if RIMCL_POCL_FAST
