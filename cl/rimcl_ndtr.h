@@ -1,13 +1,15 @@
 /*
  * rimcl_ndtr.h -- the standard normal distribution function, 8 values at a time, in double.
  *
- * Purpose: ndtr8(a) = P(X <= a) for a standard normal X, to a few units in the last place
- * of 1, as scipy.special.ndtr computes it (the exact renderer integrates each ray's
- * Gaussian over pixels as differences of ndtr, as rimcl/render.py does with scipy). Pure
+ * Purpose: ndtr8(a, exp(-a^2/2)) = P(X <= a) for a standard normal X, to a few units in
+ * the last place of 1, as scipy.special.ndtr computes it (the exact renderer integrates
+ * each ray's Gaussian over pixels as differences of ndtr, as rimcl/render.py does with
+ * scipy); ndtr_exp, the exponential its caller needs at a few points. Pure
  * arithmetic on double8 vectors, no library calls, so that it runs in vector registers on
  * CPUs (GPUs split the vectors):
  *   |x| < 1/sqrt(2) (x = a / sqrt(2)): ndtr = 1/2 + erf(x)/2, erf from its Taylor series;
- *   otherwise: erfc(|x|) = exp(-x^2) erfcx(|x|), with (1 + 2z) erfcx(z) a degree-20
+ *   otherwise: erfc(|x|) = exp(-x^2) erfcx(|x|) (exp(-x^2) = exp(-a^2/2) given), with
+ *   (1 + 2z) erfcx(z) a degree-20
  *   polynomial in t = (z - 4)/(z + 4), fitted for z in [0.7, 27.5] (relative error
  *   4.4e-16 in double arithmetic); beyond 27.5 erfc underflows and is taken as 0.
  * Also the unaligned double8 loads and stores of the image kernel (LOAD8, STORE8).
@@ -32,7 +34,7 @@ typedef double rimcl_double8_u __attribute__((ext_vector_type(8), aligned(8)));
 /* 2^52 + 2^51: adding and subtracting it rounds a double to an integer (ties to even) */
 #define NDTR_ROUNDER 6755399441055744.0
 
-/* exp(y) for y <= 0 to about 1 ulp; 0 where the result would be subnormal. */
+/* exp(y) for y < 709 to about 1 ulp; 0 where the result would be subnormal. */
 RIMCL_INLINE double8 ndtr_exp(double8 y)
 {
     const double log2e = 1.4426950408889634;
@@ -84,8 +86,8 @@ RIMCL_INLINE double8 ndtr_erf_small(double8 x)
     return x * p;
 }
 
-/* erfc(z) for z >= 0.7. */
-RIMCL_INLINE double8 ndtr_erfc_large(double8 z)
+/* erfcx(z) = exp(z^2) erfc(z) for z >= 0.7. */
+RIMCL_INLINE double8 ndtr_erfcx(double8 z)
 {
     const double8 t = (z - 4.0) / (z + 4.0);
     double8 p = -1.7234428715785117e-08;
@@ -109,12 +111,13 @@ RIMCL_INLINE double8 ndtr_erfc_large(double8 z)
     p = p * t + 0.01537965210262221;
     p = p * t - 0.13962111684056228;
     p = p * t + 1.2329951186255526;
-    const double8 erfcx = p / (1.0 + 2.0 * z);
-    return (z > 27.5) ? (double8)(0.0) : ndtr_exp(-(z * z)) * erfcx;
+    return p / (1.0 + 2.0 * z);
 }
 
-/* P(X <= a) for a standard normal X, lane by lane. */
-RIMCL_INLINE double8 ndtr8(double8 a)
+/* P(X <= a) for a standard normal X, lane by lane, given gauss = exp(-a^2 / 2) to a few
+ * ulp (the caller makes it: a pixel's edges are in arithmetic progression, so their
+ * exponentials follow from two by a recurrence, gauss_steps). */
+RIMCL_INLINE double8 ndtr8(double8 a, double8 gauss)
 {
     const double sqrth = 0.7071067811865476;
     const double8 x = a * sqrth;
@@ -122,8 +125,10 @@ RIMCL_INLINE double8 ndtr8(double8 a)
     const long8 middle_lane = z < sqrth;
     /* each branch only where some lane needs it (most pixel edges lie in the tails) */
     double8 tail = (double8)(0.0), middle = (double8)(0.0);
-    if (!all(middle_lane))
-        tail = 0.5 * ndtr_erfc_large(middle_lane ? (double8)(0.7) : z);
+    if (!all(middle_lane)) {
+        tail = 0.5 * gauss * ndtr_erfcx(middle_lane ? (double8)(0.7) : z);
+        tail = (z > 27.5) ? (double8)(0.0) : tail;
+    }
     if (any(middle_lane))
         middle = 0.5 + 0.5 * ndtr_erf_small(middle_lane ? x : (double8)(0.0));
     return middle_lane ? middle : ((x > 0.0) ? 1.0 - tail : tail);

@@ -161,7 +161,8 @@ class DeviceImager:
         self.scale_target = float(sensor.peak_electrons if sensor.noise else renderer.full_scale)
         camera = [sigma, float(imaging.threshold), float(renderer.full_scale), self.scale_target]
         electrons = [sensor.background_e, sensor.full_well_e, sensor.read_noise_e, sensor.gain]
-        consts = np.concatenate([camera, electrons, kernel]).astype(np.float64)
+        recurrence = [math.exp(-32.0 / sigma**2), math.exp(-64.0 / sigma**2)]  # image.cl
+        consts = np.concatenate([camera, electrons, recurrence, kernel]).astype(np.float64)
         self.consts = cl.Buffer(context, ro, hostbuf=consts)
         area = window * window
         slot_bytes = area * 24 + self.rays * 24 + 16 * SPLAT_BLOCK * self.table_width
