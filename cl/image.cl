@@ -23,7 +23,7 @@
  *
  * Required defines: RIMCL_RENDERER (0 exact, 1 paper), RIMCL_CENTROID (0 excess weights,
  *   1 grey weights). Optional: RIMCL_NOISE (0, default: the deterministic camera; 1: sensor
- *   noise), RIMCL_SPLAT_BLOCK (sources added per pass over the image, default 8),
+ *   noise), RIMCL_SPLAT_BLOCK (sources added per pass over the image, default 16),
  *   RIMCL_POCL_FAST (rimcl_inline.h).
  * Needs cl_khr_fp64.
  * Units: pixels of the camera (pixel i spans [i, i + 1)); light in units of ray weight;
@@ -316,17 +316,18 @@ RIMCL_INLINE void splat(const double2 position, const double weight, const int w
 /* Sources added in one pass over their union footprint (each pixel loaded and stored
  * once per block instead of once per source; the sums keep the source order). */
 #ifndef RIMCL_SPLAT_BLOCK
-#define RIMCL_SPLAT_BLOCK 8
+#define RIMCL_SPLAT_BLOCK 16
 #endif
 
-/* splat() of `count` sources one after another, in one pass where their union footprint
- * fits the factor tables: every pixel adds the sources' light in their order, adding an
- * exact 0 for a source whose footprint misses it, so the sums are splat()'s bit for bit.
- * `factors` holds RIMCL_SPLAT_BLOCK x 2 tables of table_width doubles. */
-RIMCL_INLINE void splat_block(const double2 *positions, const double *weights, const int count,
-                              const int width, const int height, const int radius,
-                              const int table_width, __constant const double *consts,
-                              __global double *image, __global double *factors)
+/* splat() of `count` sources one after another in one pass over their union footprint,
+ * which fits the factor tables (splat_block sees to it): every pixel adds the sources'
+ * light in their order, adding an exact 0 for a source whose footprint misses it, so the
+ * sums are splat()'s bit for bit. `factors` holds RIMCL_SPLAT_BLOCK x 2 tables of
+ * table_width doubles. */
+RIMCL_INLINE void splat_run(const double2 *positions, const double *weights, const int count,
+                            const int width, const int height, const int radius,
+                            const int table_width, __constant const double *consts,
+                            __global double *image, __global double *factors)
 {
     int x0[RIMCL_SPLAT_BLOCK], y0[RIMCL_SPLAT_BLOCK], y1[RIMCL_SPLAT_BLOCK];
     int lo_x = width, hi_x = 0, lo_y = height, hi_y = 0;
@@ -341,12 +342,6 @@ RIMCL_INLINE void splat_block(const double2 *positions, const double *weights, c
         hi_y = max(hi_y, y1[k]);
     }
     const int span = hi_x - lo_x;
-    if (count == 1 || span + 8 > table_width) {
-        for (int k = 0; k < count; ++k)
-            splat(positions[k], weights[k], width, height, radius, table_width, consts, image,
-                  factors);
-        return;
-    }
     for (int k = 0; k < count; ++k) {
         __global double *across = factors + 2 * k * table_width;
         __global double *down = across + table_width;
@@ -366,12 +361,66 @@ RIMCL_INLINE void splat_block(const double2 *positions, const double *weights, c
             g[k] = (j >= y0[k] && j < y1[k]) ? factors[(2 * k + 1) * table_width + j - y0[k]]
                                              : 0.0;
         __global double *line = image + j * width + lo_x;
-        for (int i = 0; i < span; i += 8) {
+        int i = 0;
+        /* four vectors at a time: each pixel's sum is a chain of dependent additions (the
+         * source order), so independent pixels are interleaved to hide their latency */
+        for (; i + 24 < span; i += 32) {
+            double8 sum0 = LOAD8(line + i), sum1 = LOAD8(line + i + 8);
+            double8 sum2 = LOAD8(line + i + 16), sum3 = LOAD8(line + i + 24);
+            for (int k = 0; k < count; ++k) {
+                __global const double *across = factors + 2 * k * table_width + i;
+                sum0 = sum0 + g[k] * LOAD8(across);
+                sum1 = sum1 + g[k] * LOAD8(across + 8);
+                sum2 = sum2 + g[k] * LOAD8(across + 16);
+                sum3 = sum3 + g[k] * LOAD8(across + 24);
+            }
+            STORE8(sum0, line + i);
+            STORE8(sum1, line + i + 8);
+            STORE8(sum2, line + i + 16);
+            STORE8(sum3, line + i + 24);
+        }
+        for (; i < span; i += 8) {
             double8 sum = LOAD8(line + i);
             for (int k = 0; k < count; ++k)
                 sum = sum + g[k] * LOAD8(factors + 2 * k * table_width + i);
             STORE8(sum, line + i);
         }
+    }
+}
+
+/* splat() of `count` sources one after another: runs of consecutive sources whose union
+ * footprint fits the factor tables (at most table_width - 8 pixels across and down) in
+ * one pass each (splat_run), a source alone by splat(). Every pixel still adds the
+ * sources in their order, so the sums are splat()'s bit for bit. */
+RIMCL_INLINE void splat_block(const double2 *positions, const double *weights, const int count,
+                              const int width, const int height, const int radius,
+                              const int table_width, __constant const double *consts,
+                              __global double *image, __global double *factors)
+{
+    int first = 0;
+    while (first < count) {
+        int lo_x = width, hi_x = 0, lo_y = height, hi_y = 0, end = first;
+        for (; end < count; ++end) {
+            const int cx = (int)positions[end].x, cy = (int)positions[end].y;
+            const int next_lo_x = min(lo_x, max(0, cx - radius));
+            const int next_hi_x = max(hi_x, min(width, cx + radius + 1));
+            const int next_lo_y = min(lo_y, max(0, cy - radius));
+            const int next_hi_y = max(hi_y, min(height, cy + radius + 1));
+            if (end > first && (next_hi_x - next_lo_x + 8 > table_width ||
+                                next_hi_y - next_lo_y + 8 > table_width))
+                break;
+            lo_x = next_lo_x;
+            hi_x = next_hi_x;
+            lo_y = next_lo_y;
+            hi_y = next_hi_y;
+        }
+        if (end - first == 1)
+            splat(positions[first], weights[first], width, height, radius, table_width, consts,
+                  image, factors);
+        else
+            splat_run(positions + first, weights + first, end - first, width, height, radius,
+                      table_width, consts, image, factors);
+        first = end;
     }
 }
 

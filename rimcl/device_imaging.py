@@ -52,9 +52,9 @@ GPU_SLOTS_PER_UNIT = 256
 GPU_GROUP = 64
 #: Sources (rays, or the paper renderer's pixels) the image kernel adds to a window in one
 #: pass (each pixel loaded and stored once per block; the same sums in the same order).
-SPLAT_BLOCK = 8
+SPLAT_BLOCK = 16
 #: Pixels of room in the factor tables for the union of a block's footprints (a block
-#: whose union is wider is added source by source).
+#: whose union is wider is added in runs of consecutive sources whose union fits).
 SPLAT_SLACK = 32
 #: Largest share of the device memory the image scratch may take.
 SCRATCH_SHARE = 0.25
