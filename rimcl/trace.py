@@ -249,14 +249,23 @@ class KernelShape:
 
 #: Rays per work-item on CPUs: 8 lanes (float8: one AVX register in f32/f32c).
 CPU_LANES = 8
+#: Rays per work-item on PoCL for trilinear float states: 16 lanes, whose field sampler
+#: works on all lanes at once (cl/rimcl_field.h; 14 % faster than 8 lanes in one run of
+#: benchmarks/speed.py on the 2-core EPYC, the same bits).
+POCL_FLOAT_LANES = 16
 
 
-def default_kernel_shape(device):
-    """8 lanes and the PoCL switch on CPUs; one ray per work-item elsewhere (GPUs).
+def default_kernel_shape(device, precision="f32c", interp="trilinear"):
+    """The kernel shape for a device (DESIGN §11): on CPUs 8 lanes, 16 on PoCL for a
+    trilinear float state, and the PoCL switch; one ray per work-item elsewhere (GPUs).
 
     Parameters
     ----------
     device : pyopencl.Device
+    precision : str
+        A key of :data:`PRECISIONS`.
+    interp : str
+        A key of :data:`INTERPOLATIONS`.
 
     Returns
     -------
@@ -267,7 +276,9 @@ def default_kernel_shape(device):
     from rimcl.device import is_pocl
 
     if device.type & cl.device_type.CPU:
-        return KernelShape(lanes=CPU_LANES, pocl_fast=is_pocl(device))
+        pocl = is_pocl(device)
+        wide = pocl and precision != "f64" and interp == "trilinear"
+        return KernelShape(lanes=POCL_FLOAT_LANES if wide else CPU_LANES, pocl_fast=pocl)
     return KernelShape(lanes=1, pocl_fast=False)
 
 
@@ -608,7 +619,9 @@ def prepare_launch(
 
     if precision == "f64" and not has_fp64(device):
         raise RimclError(f"precision f64 needs cl_khr_fp64, which {device.name.strip()} lacks")
-    shape = default_kernel_shape(device) if kernel_shape is None else kernel_shape
+    shape = (
+        default_kernel_shape(device, precision, interp) if kernel_shape is None else kernel_shape
+    )
     defines = kernel_defines(field, precision, interp, plan.adaptive, shape)
     if max_steps is None:
         smallest = plan.step_min if plan.adaptive else plan.step
