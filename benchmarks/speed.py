@@ -5,11 +5,13 @@ in one run mean anything. This script times, on one field and one ray set, inter
 
 - the numba float64 implementation of the same method (``rimcl.baseline``: trilinear,
   same rays, same step, parallel over rays on all CPU cores);
-- ``rimcl.trace_rays`` with every interpolation x precision the device supports (warm:
-  kernel build and field upload excluded);
+- ``rimcl.trace_rays`` with every interpolation x precision the device supports, each
+  with the kernel shape ``trace_rays`` chooses for it (warm: kernel build and field
+  upload excluded);
 - on CPUs, the kernel shapes of DESIGN §11 (rays per work-item, the PoCL switch) for the
-  default trilinear f32c, and the 16 rays per work-item of the device engine's fan kernel
-  (``rimcl.engine.FAN_CPU_LANES``).
+  default trilinear f32c: 1, 8 and 16 rays per work-item with and without the switch
+  (16 with it is the default and the device engine's fan kernel,
+  ``rimcl.engine.FAN_CPU_LANES``).
 
 and prints a compact table (ray-steps/s, best of the repeats; ratio = median over the
 repeats of the paired ratios to numba) plus the largest difference of r' between the
@@ -36,7 +38,14 @@ from rimcl.device import describe_device, has_fp64
 from rimcl.engine import FAN_CPU_LANES
 from rimcl.provenance import to_json, versions
 from rimcl.rays import fan_rays, scene_for
-from rimcl.trace import INTERPOLATIONS, PRECISIONS, KernelShape, default_kernel_shape
+from rimcl.trace import (
+    CPU_LANES,
+    INTERPOLATIONS,
+    POCL_FLOAT_LANES,
+    PRECISIONS,
+    KernelShape,
+    default_kernel_shape,
+)
 
 
 def make_field(name):
@@ -75,20 +84,27 @@ def main():
     x_end = scene.x_end
     length = float(np.max(scene.fov_size))
 
-    default_shape = default_kernel_shape(device)
     settings = [
-        (interp, precision, default_shape)
+        (interp, precision, default_kernel_shape(device, precision, interp))
         for interp in INTERPOLATIONS
         for precision in PRECISIONS
         if (interp != "texture" or device.image_support)
         and (precision != "f64" or has_fp64(device))
     ]
-    default = ("trilinear", "f32c", default_shape)
-    if default_shape.lanes > 1:  # the kernel shapes of DESIGN §11, and the device engine's
-        shapes = ((1, False), (1, True), (default_shape.lanes, False), (FAN_CPU_LANES, True))
+    default = ("trilinear", "f32c", default_kernel_shape(device))
+    if default[2].lanes > 1:  # the kernel shapes of DESIGN §11, and the device engine's
+        shapes = (
+            (1, False),
+            (1, True),
+            (CPU_LANES, False),
+            (CPU_LANES, True),
+            (POCL_FLOAT_LANES, False),
+            (FAN_CPU_LANES, True),
+        )
         for lanes, pocl_fast in shapes:
-            if (lanes, pocl_fast) != (default_shape.lanes, default_shape.pocl_fast):
-                settings.append(("trilinear", "f32c", KernelShape(lanes, pocl_fast)))
+            setting = ("trilinear", "f32c", KernelShape(lanes, pocl_fast))
+            if setting not in settings:
+                settings.append(setting)
 
     def run(interp, precision, shape):
         return rimcl.trace_rays(

@@ -43,9 +43,10 @@ STEP_FACTORS = (4.0, 2.0, 1.0, 0.5, 0.25, 0.125)
 REFERENCE_STEP_FRACTION = 0.25
 #: Relative cost of one Sharma step per interpolation, on CPUs and on GPUs (kernel time,
 #: measured with benchmarks/speed.py on a 128³ field: PoCL 3.1 on a 2-core AMD EPYC,
-#: 8 rays per work-item; NVIDIA H100, one ray per work-item).
+#: f32c, 16 rays per work-item for trilinear and 8 for the others; NVIDIA H100, one ray
+#: per work-item).
 STEP_COST = {
-    "cpu": {"trilinear": 1.0, "texture": 5.0, "bspline3": 3.0},
+    "cpu": {"trilinear": 1.0, "texture": 6.3, "bspline3": 4.1},
     "gpu": {"trilinear": 1.0, "texture": 0.8, "bspline3": 3.7},
 }
 

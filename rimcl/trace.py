@@ -250,7 +250,7 @@ class KernelShape:
 #: Rays per work-item on CPUs: 8 lanes (float8: one AVX register in f32/f32c).
 CPU_LANES = 8
 #: Rays per work-item on PoCL for trilinear float states: 16 lanes, whose field sampler
-#: works on all lanes at once (cl/rimcl_field.h; 14 % faster than 8 lanes in one run of
+#: works on all lanes at once (cl/rimcl_field.h; 14-25 % faster than 8 lanes in runs of
 #: benchmarks/speed.py on the 2-core EPYC, the same bits).
 POCL_FLOAT_LANES = 16
 
