@@ -9,8 +9,7 @@
  * CPUs (GPUs split the vectors):
  *   |x| < 1/sqrt(2) (x = a / sqrt(2)): ndtr = 1/2 + erf(x)/2, erf from its Taylor series;
  *   otherwise: erfc(|x|) = exp(-x^2) erfcx(|x|) (exp(-x^2) = exp(-a^2/2) given), with
- *   (1 + 2z) erfcx(z) a degree-20
- *   polynomial in t = (z - 4)/(z + 4), fitted for z in [0.7, 27.5] (relative error
+ *   (1 + 2z) erfcx(z) a degree-20 polynomial in t = (z - 4)/(z + 4), fitted for z in [0.7, 27.5] (relative error
  *   4.4e-16 in double arithmetic); beyond 27.5 erfc underflows and is taken as 0.
  * Also the unaligned double8 loads and stores of the image kernel (LOAD8, STORE8).
  * Required: cl_khr_fp64 (enabled by the including kernel file). Optional define:
@@ -115,8 +114,8 @@ RIMCL_INLINE double8 ndtr_erfcx(double8 z)
 }
 
 /* P(X <= a) for a standard normal X, lane by lane, given gauss = exp(-a^2 / 2) to a few
- * ulp (the caller makes it: a pixel's edges are in arithmetic progression, so their
- * exponentials follow from two by a recurrence, gauss_steps). */
+ * ulp (the caller makes it: image.cl's source_factors takes a source's pixel edges, in
+ * arithmetic progression, from two exponentials by a recurrence). */
 RIMCL_INLINE double8 ndtr8(double8 a, double8 gauss)
 {
     const double sqrth = 0.7071067811865476;
