@@ -9,8 +9,9 @@
  * CPUs (GPUs split the vectors):
  *   |x| < 1/sqrt(2) (x = a / sqrt(2)): ndtr = 1/2 + erf(x)/2, erf from its Taylor series;
  *   otherwise: erfc(|x|) = exp(-x^2) erfcx(|x|) (exp(-x^2) = exp(-a^2/2) given), with
- *   (1 + 2z) erfcx(z) a degree-20 polynomial in t = (z - 4)/(z + 4), fitted for z in [0.7, 27.5] (relative error
- *   4.4e-16 in double arithmetic); beyond 27.5 erfc underflows and is taken as 0.
+ *   (1 + 2z) erfcx(z) a degree-20 polynomial in t = (z - 4)/(z + 4), fitted for z in
+ *   [0.7, 27.5] (relative error 4.4e-16 in double arithmetic); beyond 27.5 erfc
+ *   underflows and is taken as 0.
  * Also the unaligned double8 loads and stores of the image kernel (LOAD8, STORE8).
  * Required: cl_khr_fp64 (enabled by the including kernel file). Optional define:
  *   RIMCL_POCL_FAST (rimcl_inline.h). Units: none.
