@@ -6,8 +6,10 @@
  * its rays (fan.cl, in pixels), the window (rimcl/render.py Renderer.window_for: bounding
  * box plus the PSF pad, capped at max_window around the floor of the median image point),
  * the image (renderer "exact": each ray's Gaussian integrated over the pixels as
- * differences of ndtr, cut `radius` pixels from the ray; "paper": the rays binned to
- * pixels in ray order, then spread with scipy's normalised Gaussian kernel of `radius`),
+ * differences of ndtr, cut `radius` pixels from the ray, added in ray order, or in the
+ * order of pixel tiles where the rays spread wider than one pass of a block takes; "paper":
+ * the rays binned to pixels in ray order, then spread with scipy's normalised Gaussian
+ * kernel of `radius`),
  * the counts (scale from the reference pass or from the image's own peak; then the
  * deterministic camera: rint, clip; or, with RIMCL_NOISE, rimcl/sensor.py Sensor.digitize:
  * per pixel the Philox draws of rimcl_philox.h, shot noise, full well, read noise, gain,
@@ -128,12 +130,12 @@
 
 typedef struct {
     __global double *image;     /* light, then counts */
-    __global int *labels;       /* bins (paper), then components */
+    __global int *labels;       /* bins (paper) or tile counts (exact), then components */
     __global int *border;       /* border pixels of the tracer's component */
     __global int *light_low;    /* per component root: sum of (counts & 255) */
     __global int *light_high;   /* per component root: sum of (counts >> 8) */
-    __global double2 *sources;  /* paper: pixels hit */
-    __global double *weights;   /* paper: their light; scratch of the median */
+    __global double2 *sources;  /* paper: pixels hit; exact: spread rays in tile order */
+    __global double *weights;   /* their light; scratch of the median */
     __global double *factors;   /* 2 x table_width: one source's factors */
 } slot_scratch;
 
@@ -424,6 +426,71 @@ RIMCL_INLINE void splat_block(const double2 *positions, const double *weights, c
     }
 }
 
+/* splat_block() of `count` sources held in global memory, RIMCL_SPLAT_BLOCK at a time. */
+RIMCL_INLINE void splat_sources(__global const double2 *sources, __global const double *weights,
+                                const int count, const int width, const int height,
+                                const int radius, const int table_width,
+                                __constant const double *consts, __global double *image,
+                                __global double *factors)
+{
+    for (int n = 0; n < count; n += RIMCL_SPLAT_BLOCK) {
+        double2 block[RIMCL_SPLAT_BLOCK];
+        double block_weight[RIMCL_SPLAT_BLOCK];
+        const int in_block = min(RIMCL_SPLAT_BLOCK, count - n);
+        for (int k = 0; k < in_block; ++k) {
+            block[k] = sources[n + k];
+            block_weight[k] = weights[n + k];
+        }
+        splat_block(block, block_weight, in_block, width, height, radius, table_width, consts,
+                    image, factors);
+    }
+}
+
+/* The usable rays inside the window (spots relative to its corner) in the order of square
+ * tiles of `tile` pixels, row by row, in ray order within a tile (a stable counting sort
+ * with one count per tile in `counts`), into sources and source_weights; returns how many.
+ * Rays spread wider than the factor tables take in one pass are added in this order, so
+ * that a block's sources lie close together and share one pass over their union
+ * (splat_block); every pixel then adds the sources in this order. */
+RIMCL_INLINE int sources_in_tiles(const int rays, __global const uchar *ray_code,
+                                  __global const double2 *ray_pixel,
+                                  __global const double *ray_weight, const double2 corner,
+                                  const int width, const int height, const int tile,
+                                  __global int *counts, __global double2 *sources,
+                                  __global double *source_weights)
+{
+    const int tiles_x = (width + tile - 1) / tile;
+    const int n_tiles = tiles_x * ((height + tile - 1) / tile);
+    for (int q = 0; q < n_tiles; ++q)
+        counts[q] = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+        for (int k = 0; k < rays; ++k) {
+            if (!(ray_code[k] & RAY_COLLECTED))
+                continue;
+            const double2 spot = ray_pixel[k] - corner;
+            if (!(spot.x >= 0.0 && spot.x < width && spot.y >= 0.0 && spot.y < height))
+                continue;
+            const int q = ((int)spot.y / tile) * tiles_x + (int)spot.x / tile;
+            if (pass == 0) {
+                counts[q] += 1;
+            } else {
+                const int at = counts[q]++;
+                sources[at] = spot;
+                source_weights[at] = ray_weight[k];
+            }
+        }
+        if (pass == 0) {
+            int total = 0; /* each tile's first place */
+            for (int q = 0; q < n_tiles; ++q) {
+                const int in_tile = counts[q];
+                counts[q] = total;
+                total += in_tile;
+            }
+        }
+    }
+    return counts[n_tiles - 1];
+}
+
 #if RIMCL_NOISE
 /* rimcl/sensor.py _box_muller: a standard normal of two uniforms. */
 RIMCL_INLINE double box_muller(const double u_radius, const double u_angle)
@@ -557,29 +624,41 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
         image[p] = 0.0;
     long outside = 0;
 #if RIMCL_RENDERER == 0
-    /* each usable ray inside the window, in ray order, RIMCL_SPLAT_BLOCK at a time */
-    double2 block[RIMCL_SPLAT_BLOCK];
-    double block_weight[RIMCL_SPLAT_BLOCK];
-    int in_block = 0;
-    for (int k = 0; k < rays; ++k) {
-        if (!(ray_code[k] & RAY_COLLECTED))
-            continue;
-        const double2 spot = ray_pixel[k] - corner;
-        if (!(spot.x >= 0.0 && spot.x < width && spot.y >= 0.0 && spot.y < height)) {
-            outside += 1;
-            continue;
+    /* each usable ray inside the window, RIMCL_SPLAT_BLOCK at a time: in ray order, or in
+     * tile order when the rays spread wider than `spread` pixels, the widest spread of a
+     * block's sources whose union footprint fits the factor tables */
+    const int spread = table_width - 9 - 2 * radius;
+    if (hi_x - lo_x >= spread || hi_y - lo_y >= spread) {
+        const int n_sources = sources_in_tiles(rays, ray_code, ray_pixel, ray_weight, corner,
+                                               w_px, h_px, max(1, spread / 2), labels,
+                                               s.sources, s.weights);
+        outside = usable - n_sources;
+        splat_sources(s.sources, s.weights, n_sources, w_px, h_px, radius, table_width, consts,
+                      image, s.factors);
+    } else {
+        double2 block[RIMCL_SPLAT_BLOCK];
+        double block_weight[RIMCL_SPLAT_BLOCK];
+        int in_block = 0;
+        for (int k = 0; k < rays; ++k) {
+            if (!(ray_code[k] & RAY_COLLECTED))
+                continue;
+            const double2 spot = ray_pixel[k] - corner;
+            if (!(spot.x >= 0.0 && spot.x < width && spot.y >= 0.0 && spot.y < height)) {
+                outside += 1;
+                continue;
+            }
+            block[in_block] = spot;
+            block_weight[in_block++] = ray_weight[k];
+            if (in_block == RIMCL_SPLAT_BLOCK) {
+                splat_block(block, block_weight, in_block, w_px, h_px, radius, table_width,
+                            consts, image, s.factors);
+                in_block = 0;
+            }
         }
-        block[in_block] = spot;
-        block_weight[in_block++] = ray_weight[k];
-        if (in_block == RIMCL_SPLAT_BLOCK) {
+        if (in_block > 0)
             splat_block(block, block_weight, in_block, w_px, h_px, radius, table_width, consts,
                         image, s.factors);
-            in_block = 0;
-        }
     }
-    if (in_block > 0)
-        splat_block(block, block_weight, in_block, w_px, h_px, radius, table_width, consts,
-                    image, s.factors);
 #else
     /* the pixels hit, in the order of first hit, each with its summed weight (numpy's
      * bincount adds the weights in ray order), then each spread by the kernel */
@@ -604,17 +683,8 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
         }
         s.weights[labels[pixel]] += ray_weight[k];
     }
-    for (int n = 0; n < n_sources; n += RIMCL_SPLAT_BLOCK) {
-        double2 block[RIMCL_SPLAT_BLOCK];
-        double block_weight[RIMCL_SPLAT_BLOCK];
-        const int in_block = min(RIMCL_SPLAT_BLOCK, n_sources - n);
-        for (int k = 0; k < in_block; ++k) {
-            block[k] = s.sources[n + k];
-            block_weight[k] = s.weights[n + k];
-        }
-        splat_block(block, block_weight, in_block, w_px, h_px, radius, table_width, consts,
-                    image, s.factors);
-    }
+    splat_sources(s.sources, s.weights, n_sources, w_px, h_px, radius, table_width, consts,
+                  image, s.factors);
 #endif
     flags |= (outside > 0) ? FLAG_RAYS_OUTSIDE_WINDOW : 0;
 
