@@ -6,11 +6,13 @@
  * each ray's Gaussian over pixels as differences of ndtr, as rimcl/render.py does with
  * scipy); ndtr_exp, the exponential its caller needs at a few points. Pure
  * arithmetic on double8 vectors, no library calls, so that it runs in vector registers on
- * CPUs (GPUs split the vectors):
+ * CPUs (GPUs split the vectors); polynomials by Horner's rule in fused multiply-adds
+ * (fma: half the operations and latency of a multiply and an add; the image kernel turns
+ * contraction off for its host-matching arithmetic, so they are written out):
  *   |x| < 1/sqrt(2) (x = a / sqrt(2)): ndtr = 1/2 + erf(x)/2, erf from its Taylor series;
  *   otherwise: erfc(|x|) = exp(-x^2) erfcx(|x|) (exp(-x^2) = exp(-a^2/2) given), with
  *   (1 + 2z) erfcx(z) a degree-20 polynomial in t = (z - 4)/(z + 4), fitted for z in
- *   [0.7, 27.5] (relative error 4.4e-16 in double arithmetic as one Horner chain, 9e-16
+ *   [0.7, 27.5] (relative error 4.4e-16 in double arithmetic as one Horner chain, 1e-15
  *   as the even and odd parts evaluated here); beyond 27.5 erfc underflows and is taken
  *   as 0.
  * Also the unaligned double8 loads and stores of the image kernel (LOAD8, STORE8).
@@ -45,19 +47,19 @@ RIMCL_INLINE double8 ndtr_exp(double8 y)
     const double8 r = (y - n * ln2_hi) - n * ln2_lo;
     /* Taylor series of exp(r), |r| <= ln2 / 2: the 14th term is 4e-18 */
     double8 p = 1.6059043836821613e-10;
-    p = p * r + 2.08767569878681e-09;
-    p = p * r + 2.505210838544172e-08;
-    p = p * r + 2.755731922398589e-07;
-    p = p * r + 2.7557319223985893e-06;
-    p = p * r + 2.48015873015873e-05;
-    p = p * r + 0.0001984126984126984;
-    p = p * r + 0.001388888888888889;
-    p = p * r + 0.008333333333333333;
-    p = p * r + 0.041666666666666664;
-    p = p * r + 0.16666666666666666;
-    p = p * r + 0.5;
-    p = p * r + 1.0;
-    p = p * r + 1.0;
+    p = fma(p, r, (double8)(2.08767569878681e-09));
+    p = fma(p, r, (double8)(2.505210838544172e-08));
+    p = fma(p, r, (double8)(2.755731922398589e-07));
+    p = fma(p, r, (double8)(2.7557319223985893e-06));
+    p = fma(p, r, (double8)(2.48015873015873e-05));
+    p = fma(p, r, (double8)(0.0001984126984126984));
+    p = fma(p, r, (double8)(0.001388888888888889));
+    p = fma(p, r, (double8)(0.008333333333333333));
+    p = fma(p, r, (double8)(0.041666666666666664));
+    p = fma(p, r, (double8)(0.16666666666666666));
+    p = fma(p, r, (double8)(0.5));
+    p = fma(p, r, (double8)(1.0));
+    p = fma(p, r, (double8)(1.0));
     /* 2^n from the bits of n + NDTR_ROUNDER (its low bits hold n) */
     const long8 k = as_long8(n + NDTR_ROUNDER) - as_long(NDTR_ROUNDER);
     const double8 scale = as_double8((k + 1023) << 52);
@@ -69,53 +71,52 @@ RIMCL_INLINE double8 ndtr_erf_small(double8 x)
 {
     const double8 s = x * x;
     double8 p = -2.7835162072109215e-14;
-    p = p * s + 4.4632242632864775e-13;
-    p = p * s - 6.7113668551641105e-12;
-    p = p * s + 9.422759064650411e-11;
-    p = p * s - 1.2290555301717928e-09;
-    p = p * s + 1.4807192815879218e-08;
-    p = p * s - 1.6365844691234924e-07;
-    p = p * s + 1.6462114365889248e-06;
-    p = p * s - 1.492565035840625e-05;
-    p = p * s + 0.00012055332981789664;
-    p = p * s - 0.0008548327023450853;
-    p = p * s + 0.005223977625442188;
-    p = p * s - 0.026866170645131252;
-    p = p * s + 0.11283791670955126;
-    p = p * s - 0.37612638903183754;
-    p = p * s + 1.1283791670955126;
+    p = fma(p, s, (double8)(4.4632242632864775e-13));
+    p = fma(p, s, (double8)(-6.7113668551641105e-12));
+    p = fma(p, s, (double8)(9.422759064650411e-11));
+    p = fma(p, s, (double8)(-1.2290555301717928e-09));
+    p = fma(p, s, (double8)(1.4807192815879218e-08));
+    p = fma(p, s, (double8)(-1.6365844691234924e-07));
+    p = fma(p, s, (double8)(1.6462114365889248e-06));
+    p = fma(p, s, (double8)(-1.492565035840625e-05));
+    p = fma(p, s, (double8)(0.00012055332981789664));
+    p = fma(p, s, (double8)(-0.0008548327023450853));
+    p = fma(p, s, (double8)(0.005223977625442188));
+    p = fma(p, s, (double8)(-0.026866170645131252));
+    p = fma(p, s, (double8)(0.11283791670955126));
+    p = fma(p, s, (double8)(-0.37612638903183754));
+    p = fma(p, s, (double8)(1.1283791670955126));
     return x * p;
 }
 
 /* erfcx(z) = exp(z^2) erfc(z) for z >= 0.7. The polynomial in t as its even and odd
  * parts in t^2: two chains of 10 multiply-adds instead of one of 20, whose latency the
- * image kernel waited on (-9 % render time on the 2-core EPYC). Within 9e-16 of
- * scipy.special.erfcx over [0.7, 27.5] (6.7e-16 as one chain). */
+ * image kernel waited on. Within 1e-15 of scipy.special.erfcx over [0.7, 27.5]. */
 RIMCL_INLINE double8 ndtr_erfcx(double8 z)
 {
     const double8 t = (z - 4.0) / (z + 4.0);
     const double8 s = t * t;
     double8 even = -1.7234428715785117e-08;
     double8 odd = 7.785873874860938e-08;
-    even = even * s + 7.94178940695347e-08;
-    odd = odd * s - 7.908013313281755e-07;
-    even = even * s + 2.865427968428462e-07;
-    odd = odd * s + 5.688288902690869e-06;
-    even = even * s - 1.1217174704912293e-05;
-    odd = odd * s - 2.439095894401932e-05;
-    even = even * s + 0.00015061984724729657;
-    odd = odd * s - 0.00019925871832540145;
-    even = even * s - 0.0007577728755798006;
-    odd = odd * s + 0.005031970290713591;
-    even = even * s - 0.016197734113606525;
-    odd = odd * s + 0.037167515508307124;
-    even = even * s - 0.06633036580793396;
-    odd = odd * s + 0.09373283499985118;
-    even = even * s - 0.10103906603646996;
-    odd = odd * s + 0.06809705425465713;
-    even = even * s + 0.01537965210262221;
-    odd = odd * s - 0.13962111684056228;
-    even = even * s + 1.2329951186255526;
+    even = fma(even, s, (double8)(7.94178940695347e-08));
+    odd = fma(odd, s, (double8)(-7.908013313281755e-07));
+    even = fma(even, s, (double8)(2.865427968428462e-07));
+    odd = fma(odd, s, (double8)(5.688288902690869e-06));
+    even = fma(even, s, (double8)(-1.1217174704912293e-05));
+    odd = fma(odd, s, (double8)(-2.439095894401932e-05));
+    even = fma(even, s, (double8)(0.00015061984724729657));
+    odd = fma(odd, s, (double8)(-0.00019925871832540145));
+    even = fma(even, s, (double8)(-0.0007577728755798006));
+    odd = fma(odd, s, (double8)(0.005031970290713591));
+    even = fma(even, s, (double8)(-0.016197734113606525));
+    odd = fma(odd, s, (double8)(0.037167515508307124));
+    even = fma(even, s, (double8)(-0.06633036580793396));
+    odd = fma(odd, s, (double8)(0.09373283499985118));
+    even = fma(even, s, (double8)(-0.10103906603646996));
+    odd = fma(odd, s, (double8)(0.06809705425465713));
+    even = fma(even, s, (double8)(0.01537965210262221));
+    odd = fma(odd, s, (double8)(-0.13962111684056228));
+    even = fma(even, s, (double8)(1.2329951186255526));
     const double8 p = even + t * odd;
     return p / (1.0 + 2.0 * z);
 }
