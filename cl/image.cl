@@ -338,19 +338,20 @@ RIMCL_INLINE void splat_run(const double2 *positions, const double *weights, con
                             const int table_width, __constant const double *consts,
                             __global double *image, __global double *factors)
 {
-    int x0[RIMCL_SPLAT_BLOCK], y0[RIMCL_SPLAT_BLOCK], y1[RIMCL_SPLAT_BLOCK];
+    int x0[RIMCL_SPLAT_BLOCK], y0[RIMCL_SPLAT_BLOCK];
     int lo_x = width, hi_x = 0, lo_y = height, hi_y = 0;
     for (int k = 0; k < count; ++k) {
         const int cx = (int)positions[k].x, cy = (int)positions[k].y;
         x0[k] = max(0, cx - radius);
         y0[k] = max(0, cy - radius);
-        y1[k] = min(height, cy + radius + 1);
         lo_x = min(lo_x, x0[k]);
         hi_x = max(hi_x, min(width, cx + radius + 1));
         lo_y = min(lo_y, y0[k]);
-        hi_y = max(hi_y, y1[k]);
+        hi_y = max(hi_y, min(height, cy + radius + 1));
     }
     const int span = hi_x - lo_x;
+    /* the vectors of a pass read the tables up to 7 entries past the union */
+    const int read_x = min(table_width, span + 8), read_y = min(table_width, hi_y - lo_y + 8);
     for (int k = 0; k < count; ++k) {
         __global double *across = factors + 2 * k * table_width;
         __global double *down = across + table_width;
@@ -360,20 +361,21 @@ RIMCL_INLINE void splat_run(const double2 *positions, const double *weights, con
                        &f0, &f1);
         for (int i = 0; i < x0[k] - lo_x; ++i)
             across[i] = 0.0;
-        for (int i = f1 - lo_x; i < table_width; ++i)
+        for (int i = f1 - lo_x; i < read_x; ++i)
             across[i] = 0.0;
-        source_factors(positions[k].y, height, radius, weights[k], consts, down, &g0, &g1);
+        source_factors(positions[k].y, height, radius, weights[k], consts, down + (y0[k] - lo_y),
+                       &g0, &g1);
+        for (int i = 0; i < y0[k] - lo_y; ++i)
+            down[i] = 0.0;
+        for (int i = g1 - lo_y; i < read_y; ++i)
+            down[i] = 0.0;
     }
     /* two rows at a time (each factor vector loaded once for both), where the vectors of
      * one row cannot reach the other's in the same pass (32 pixels per pass) */
     int j = lo_y;
     for (; width >= 32 && j + 1 < hi_y; j += 2) {
-        double g[RIMCL_SPLAT_BLOCK], h[RIMCL_SPLAT_BLOCK];
-        for (int k = 0; k < count; ++k) {
-            __global const double *down = factors + (2 * k + 1) * table_width - y0[k];
-            g[k] = (j >= y0[k] && j < y1[k]) ? down[j] : 0.0;
-            h[k] = (j + 1 >= y0[k] && j + 1 < y1[k]) ? down[j + 1] : 0.0;
-        }
+        /* source k's factor of row j at down[2 k table_width], of row j + 1 next to it */
+        __global const double *down = factors + table_width + (j - lo_y);
         __global double *line = image + j * width + lo_x;
         __global double *below = line + width;
         int i = 0;
@@ -388,14 +390,15 @@ RIMCL_INLINE void splat_run(const double2 *positions, const double *weights, con
                 __global const double *across = factors + 2 * k * table_width + i;
                 const double8 a0 = LOAD8(across), a1 = LOAD8(across + 8);
                 const double8 a2 = LOAD8(across + 16), a3 = LOAD8(across + 24);
-                sum0 = add_light(sum0, g[k], a0);
-                sum1 = add_light(sum1, g[k], a1);
-                sum2 = add_light(sum2, g[k], a2);
-                sum3 = add_light(sum3, g[k], a3);
-                next0 = add_light(next0, h[k], a0);
-                next1 = add_light(next1, h[k], a1);
-                next2 = add_light(next2, h[k], a2);
-                next3 = add_light(next3, h[k], a3);
+                const double g = down[2 * k * table_width], h = down[2 * k * table_width + 1];
+                sum0 = add_light(sum0, g, a0);
+                sum1 = add_light(sum1, g, a1);
+                sum2 = add_light(sum2, g, a2);
+                sum3 = add_light(sum3, g, a3);
+                next0 = add_light(next0, h, a0);
+                next1 = add_light(next1, h, a1);
+                next2 = add_light(next2, h, a2);
+                next3 = add_light(next3, h, a3);
             }
             STORE8(sum0, line + i);
             STORE8(sum1, line + i + 8);
@@ -410,18 +413,16 @@ RIMCL_INLINE void splat_run(const double2 *positions, const double *weights, con
             double8 sum = LOAD8(line + i), next = LOAD8(below + i);
             for (int k = 0; k < count; ++k) {
                 const double8 a = LOAD8(factors + 2 * k * table_width + i);
-                sum = add_light(sum, g[k], a);
-                next = add_light(next, h[k], a);
+                const double g = down[2 * k * table_width], h = down[2 * k * table_width + 1];
+                sum = add_light(sum, g, a);
+                next = add_light(next, h, a);
             }
             STORE8(sum, line + i);
             STORE8(next, below + i);
         }
     }
     for (; j < hi_y; ++j) {
-        double g[RIMCL_SPLAT_BLOCK];
-        for (int k = 0; k < count; ++k)
-            g[k] = (j >= y0[k] && j < y1[k]) ? factors[(2 * k + 1) * table_width + j - y0[k]]
-                                             : 0.0;
+        __global const double *down = factors + table_width + (j - lo_y);
         __global double *line = image + j * width + lo_x;
         int i = 0;
         for (; i + 24 < span; i += 32) {
@@ -429,10 +430,11 @@ RIMCL_INLINE void splat_run(const double2 *positions, const double *weights, con
             double8 sum2 = LOAD8(line + i + 16), sum3 = LOAD8(line + i + 24);
             for (int k = 0; k < count; ++k) {
                 __global const double *across = factors + 2 * k * table_width + i;
-                sum0 = add_light(sum0, g[k], LOAD8(across));
-                sum1 = add_light(sum1, g[k], LOAD8(across + 8));
-                sum2 = add_light(sum2, g[k], LOAD8(across + 16));
-                sum3 = add_light(sum3, g[k], LOAD8(across + 24));
+                const double g = down[2 * k * table_width];
+                sum0 = add_light(sum0, g, LOAD8(across));
+                sum1 = add_light(sum1, g, LOAD8(across + 8));
+                sum2 = add_light(sum2, g, LOAD8(across + 16));
+                sum3 = add_light(sum3, g, LOAD8(across + 24));
             }
             STORE8(sum0, line + i);
             STORE8(sum1, line + i + 8);
@@ -442,7 +444,8 @@ RIMCL_INLINE void splat_run(const double2 *positions, const double *weights, con
         for (; i < span; i += 8) {
             double8 sum = LOAD8(line + i);
             for (int k = 0; k < count; ++k)
-                sum = add_light(sum, g[k], LOAD8(factors + 2 * k * table_width + i));
+                sum = add_light(sum, down[2 * k * table_width],
+                                LOAD8(factors + 2 * k * table_width + i));
             STORE8(sum, line + i);
         }
     }
