@@ -2,7 +2,10 @@
  * fan.cl -- a camera's rays from a batch of tracers, made, traced and imaged on the device.
  *
  * The device engine's first stage (DESIGN §14). Ray g of the batch belongs to tracer
- * g / K and aims at the camera's aim point g % K (K rays per tracer). Each ray is made
+ * g / K and aims at the camera's aim point g % K (K rays per tracer). Slot s of the batch
+ * (lane s % RIMCL_LANES of work-item s / RIMCL_LANES) traces ray (s / K) K + order[s % K]:
+ * `order` groups rays of similar path length in a work-item, whose lanes all step until
+ * its longest ray ends (rimcl.engine.lane_order). Each ray is made
  * from float64 tracer and aim positions exactly as rimcl.camera and rimcl.trace_rays make
  * it on the host (difference, two normalisations, float (hi, lo) pairs; behind a window
  * LensCamera.directions' Newton solve, then one normalisation), so the trace sees the same
@@ -34,11 +37,12 @@
  *   [i, i + 1) from the image origin); refractive indices as ratios (dimensionless).
  * Axis order: 3-vectors are (x1, x2, x3); tracers and image points are (x2, x3).
  * Kernels: trace_fan (the stage); fan_directions (each ray's initial direction, for tests).
- * Work-item: RIMCL_LANES consecutive rays of the batch (as trace.cl); fan_directions: one.
+ * Work-item: RIMCL_LANES consecutive slots of the batch; fan_directions: one ray.
  * Global size: ceil(n_rays / RIMCL_LANES) (extra items return); fan_directions: n_rays.
  *
  * tracers (B x 2 doubles): tracer positions (x2, x3) on the sheet.
  * aims    (K x 3 doubles): the camera's aim points (x1, x2, x3) (a lens: its pupil's).
+ * order   (K ints): a permutation of the aim points, the order their rays fill lanes in.
  * camera  (CAM_COUNT doubles, offsets CAM_* below; the CAM_WINDOW_* ones only for 2).
  * ray_pixel (n_rays double2): image point (x2, x3) in pixels; NaN unless collected.
  * ray_steps (n_rays int): steps taken.
@@ -190,8 +194,9 @@ RIMCL_INLINE int sample_slot(__global const int *sample_rays, const int n_sample
 
 __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant const float *params,
                         __global const double *tracers, __global const double *aims,
-                        __constant const double *camera, const int rays_per_tracer,
-                        const int n_rays, const int max_steps, __global double2 *ray_pixel,
+                        __global const int *order, __constant const double *camera,
+                        const int rays_per_tracer, const int n_rays, const int max_steps,
+                        __global double2 *ray_pixel,
                         __global int *ray_steps, __global uchar *ray_code,
                         __global const int *sample_rays, const int n_sample,
                         __global float *sample_out, __global int4 *sample_info,
@@ -208,14 +213,18 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
      * (hi, lo) pairs) do; lanes past the last ray repeat it and are never stored. */
     lvec3 origin_hi, origin_lo, dir_hi, dir_lo;
     lmask valid;
+    int lane_ray[RIMCL_LANES];
 #if RIMCL_STRAIGHT
     double lane_start[RIMCL_LANES][3], lane_dir[RIMCL_LANES][3];
 #endif
 #pragma unroll
     for (int k = 0; k < RIMCL_LANES; ++k) {
-        const int ray = (first + k < n_rays) ? first + k : n_rays - 1;
-        const int tracer = ray / rays_per_tracer;
-        __global const double *aim = aims + 3 * (ray - tracer * rays_per_tracer);
+        const int slot = (first + k < n_rays) ? first + k : n_rays - 1;
+        const int tracer = slot / rays_per_tracer;
+        const int aim_index = order[slot - tracer * rays_per_tracer];
+        const int ray = tracer * rays_per_tracer + aim_index;
+        lane_ray[k] = ray;
+        __global const double *aim = aims + 3 * aim_index;
         const double start[3] = {x_sheet, tracers[2 * tracer], tracers[2 * tracer + 1]};
         double d[3];
         camera_direction(camera, start, aim, d);
@@ -267,9 +276,9 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
 
 #pragma unroll
     for (int k = 0; k < RIMCL_LANES; ++k) {
-        const int ray = first + k;
-        if (ray >= n_rays)
-            break;
+        if (first + k >= n_rays)
+            continue;
+        const int ray = lane_ray[k];
         double end[3], dir[3];
 #if RIMCL_STRAIGHT
         int status, steps = 0;

@@ -36,7 +36,7 @@ import time
 
 import numpy as np
 
-from rimcl.camera import LensCamera, PupilCamera
+from rimcl.camera import LensCamera, PlaneCamera, PupilCamera
 from rimcl.device_imaging import DeviceImager, profiling_queue, require_fp64
 from rimcl.errors import RimclError
 from rimcl.trace import (
@@ -57,6 +57,43 @@ FAN_GROUP = 64
 #: flight hide more of the field's memory latency: +13 % ray-steps per CPU-second on the
 #: shipped 64³ periodic sample, the same on a 128³ clamped field; results are identical).
 FAN_CPU_LANES = 16
+
+
+def lane_order(camera):
+    """The order in which the fan kernel gives a tracer's rays to its lanes (work-items on
+    GPUs): the aim points along a Z-order curve, so that rays traced side by side aim at
+    nearby points and end after nearly the same number of steps (the lanes of a
+    work-item, or the work-items of a GPU warp, all step until the longest ends).
+
+    The aim points of a plane camera's ``M x M`` grid by their grid indices (aligned
+    ``4 x 4`` blocks of 16 rays); any other camera's by their positions on a 1024 x 1024
+    grid over the points' extent. Measured on the paper's fan (100 x 100): 3.0 % of the
+    lane-steps of 16 consecutive rays are idle, 0.7 % of a 4 x 4 block's; the fan kernel
+    ran 5-7 % faster in this order (2-core AMD EPYC, PoCL, 16 lanes).
+
+    Parameters
+    ----------
+    camera : PlaneCamera, PupilCamera or LensCamera
+
+    Returns
+    -------
+    ndarray, int32, shape (K,)
+        Aim-point indices, a permutation of ``range(K)``.
+    """
+    points = np.asarray(camera.aim_points())[:, 1:]
+    if isinstance(camera, PlaneCamera):
+        fan = int(camera.fan)
+        index = np.arange(fan * fan)
+        cells = np.stack([index % fan, index // fan], axis=-1)  # (x2, x3) columns, rows
+    else:
+        lo, size = points.min(axis=0), np.ptp(points, axis=0)
+        scaled = (points - lo) / np.where(size > 0, size, 1.0)
+        cells = np.minimum((scaled * 1024).astype(np.int64), 1023)
+    code = np.zeros(len(points), dtype=np.int64)
+    for bit in range(11):
+        code |= ((cells[:, 0] >> bit) & 1) << (2 * bit)
+        code |= ((cells[:, 1] >> bit) & 1) << (2 * bit + 1)
+    return np.argsort(code, kind="stable").astype(np.int32)
 
 
 def _seconds(event):
@@ -123,6 +160,7 @@ class DeviceEngine:
         context = context_for(device)
         ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
         self.aims = cl.Buffer(context, ro, hostbuf=np.ascontiguousarray(camera.aim_points()))
+        self.order = cl.Buffer(context, ro, hostbuf=lane_order(camera))
         self.camera_block = cl.Buffer(context, ro, hostbuf=self._camera_block())
         size = self.batch * self.rays
         rw = cl.mem_flags.READ_WRITE
@@ -377,6 +415,7 @@ class DeviceEngine:
             launch.params,
             self.tracers,
             self.aims,
+            self.order,
             self.camera_block,
             np.int32(self.rays),
             np.int32(n_rays),

@@ -182,3 +182,29 @@ def test_directions_of_single_rays_equal_the_full_fan_bit_for_bit(kind):
     np.testing.assert_array_equal(
         camera.directions(tracers, aim_index), every[np.arange(40), aim_index]
     )
+
+
+def test_lane_order_groups_nearby_aim_points():
+    """The device engine's fan kernel gives rays to lanes in lane_order: a permutation of
+    the aim points whose aligned groups of 16 are 4 x 4 blocks of a plane camera's grid,
+    and compact clusters of a pupil's spiral (whose consecutive points lie far apart)."""
+    from rimcl.engine import lane_order
+
+    plane = PlaneCamera(_scene(), fan=8)
+    order = lane_order(plane)
+    assert order.dtype == np.int32
+    np.testing.assert_array_equal(np.sort(order), np.arange(64))
+    for group in order.reshape(-1, 16):
+        columns, rows = group % 8, group // 8
+        assert np.ptp(columns) == 3 and np.ptp(rows) == 3 and columns.min() % 4 == 0
+
+    pupil = _pupil(rays=2048)
+    order = lane_order(pupil)
+    np.testing.assert_array_equal(np.sort(order), np.arange(2048))
+    points = pupil.aim_points()
+
+    def mean_spread(indices):
+        groups = points[indices].reshape(-1, 16, 3)
+        return np.mean(np.linalg.norm(np.ptp(groups, axis=1), axis=-1))
+
+    assert mean_spread(order) < 0.25 * mean_spread(np.arange(2048))
