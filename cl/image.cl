@@ -487,6 +487,12 @@ RIMCL_INLINE void splat_block(const double2 *positions, const double *weights, c
     }
 }
 
+/* Whether an image point (relative to the window's corner, pixels) lies in the window. */
+RIMCL_INLINE int in_window(const double2 spot, const double width, const double height)
+{
+    return spot.x >= 0.0 && spot.x < width && spot.y >= 0.0 && spot.y < height;
+}
+
 /* splat_block() of `count` sources held in global memory, RIMCL_SPLAT_BLOCK at a time. */
 RIMCL_INLINE void splat_sources(__global const double2 *sources, __global const double *weights,
                                 const int count, const int width, const int height,
@@ -529,7 +535,7 @@ RIMCL_INLINE int sources_in_tiles(const int rays, __global const uchar *ray_code
             if (!(ray_code[k] & RAY_COLLECTED))
                 continue;
             const double2 spot = ray_pixel[k] - corner;
-            if (!(spot.x >= 0.0 && spot.x < width && spot.y >= 0.0 && spot.y < height))
+            if (!in_window(spot, width, height))
                 continue;
             const int q = ((int)spot.y / tile) * tiles_x + (int)spot.x / tile;
             if (pass == 0) {
@@ -704,7 +710,7 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
             if (!(ray_code[k] & RAY_COLLECTED))
                 continue;
             const double2 spot = ray_pixel[k] - corner;
-            if (!(spot.x >= 0.0 && spot.x < width && spot.y >= 0.0 && spot.y < height)) {
+            if (!in_window(spot, width, height)) {
                 outside += 1;
                 continue;
             }
@@ -730,7 +736,7 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
         if (!(ray_code[k] & RAY_COLLECTED))
             continue;
         const double2 spot = ray_pixel[k] - corner;
-        if (!(spot.x >= 0.0 && spot.x < width && spot.y >= 0.0 && spot.y < height)) {
+        if (!in_window(spot, width, height)) {
             outside += 1;
             continue;
         }
