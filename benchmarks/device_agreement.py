@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 import rimcl
-from rimcl.device import has_fp64
+from rimcl.core.device import has_fp64
 
 
 def make_case(count=4096, seed=7):

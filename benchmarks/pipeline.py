@@ -1,7 +1,7 @@
 """End-to-end speed of the measurement through both engines, on any device, in one run.
 
 Two scenes, each through ``engine = "numpy"`` (trace on the device, images tracer by
-tracer in NumPy) and ``engine = "device"`` (:mod:`rimcl.engine`: rays stay on the device
+tracer in NumPy) and ``engine = "device"`` (:mod:`rimcl.imaging.engine`: rays stay on the device
 until per-tracer rows come back), with the reference of each engine made once and reused
 for every case, as ``rimcl study`` does:
 
@@ -37,11 +37,11 @@ import io
 import pstats
 import time
 
-from rimcl.config import MeasureConfig
-from rimcl.device import describe_device, select_device
-from rimcl.measure import run_render
-from rimcl.provenance import to_json, versions
-from rimcl.scene import load_scene
+from rimcl.core.device import describe_device, select_device
+from rimcl.core.provenance import to_json, versions
+from rimcl.ptv.measure import run_render
+from rimcl.scene.config import MeasureConfig
+from rimcl.scene.load import load_scene
 
 ENGINES = ("numpy", "device")
 TIMINGS = ("track", "trace", "render", "centroid", "engine_host", "ray_sample")

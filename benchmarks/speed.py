@@ -3,7 +3,7 @@
 DESIGN §11: the machines drift by 30-40 % from minute to minute, so only ratios measured
 in one run mean anything. This script times, on one field and one ray set, interleaved:
 
-- the numba float64 implementation of the same method (``rimcl.baseline``: trilinear,
+- the numba float64 implementation of the same method (``rimcl.optics.baseline``: trilinear,
   same rays, same step, parallel over rays on all CPU cores);
 - ``rimcl.trace_rays`` with every interpolation x precision the device supports, each
   with the kernel shape ``trace_rays`` chooses for it (warm: kernel build and field
@@ -11,7 +11,7 @@ in one run mean anything. This script times, on one field and one ray set, inter
 - on CPUs, the kernel shapes of DESIGN §11 (rays per work-item, the PoCL switch) for the
   default trilinear f32c: 1, 8 and 16 rays per work-item with and without the switch
   (16 with it is the default and the device engine's fan kernel,
-  ``rimcl.engine.FAN_CPU_LANES``).
+  ``rimcl.imaging.engine.FAN_CPU_LANES``).
 
 and prints a compact table (ray-steps/s, best of the repeats; ratio = median over the
 repeats of the paired ratios to numba) plus the largest difference of r' between the
@@ -33,12 +33,12 @@ import time
 import numpy as np
 
 import rimcl
-from rimcl.bench import synthetic_density
-from rimcl.device import describe_device, has_fp64
-from rimcl.engine import FAN_CPU_LANES
-from rimcl.provenance import to_json, versions
-from rimcl.rays import fan_rays, scene_for
-from rimcl.trace import (
+from rimcl.core.device import describe_device, has_fp64
+from rimcl.core.provenance import to_json, versions
+from rimcl.imaging.engine import FAN_CPU_LANES
+from rimcl.optics.bench import synthetic_density
+from rimcl.optics.rays import fan_rays, scene_for
+from rimcl.optics.trace import (
     CPU_LANES,
     INTERPOLATIONS,
     POCL_FLOAT_LANES,
@@ -120,7 +120,7 @@ def main():
 
     numba_trace = None
     if not args.no_numba:
-        from rimcl.baseline import trace_rays_numba
+        from rimcl.optics.baseline import trace_rays_numba
 
         def numba_trace():
             return trace_rays_numba(field, origins, directions, x_end=x_end)

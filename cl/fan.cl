@@ -11,8 +11,8 @@
  * LensCamera.directions' Newton solve, then one normalisation), so the trace sees the same
  * input bits; it is traced by trace_lanes() (rimcl_trace.h); its exit state is refracted
  * by the window (if any), back-projected to the plane the camera images and tested
- * against the camera in float64 with the host's operations (rimcl/trace.py _finish,
- * rimcl/camera.py collected, through_window, image_points, rimcl/render.py to_pixels),
+ * against the camera in float64 with the host's operations (rimcl/optics/trace.py _finish,
+ * rimcl/optics/camera.py collected, through_window, image_points, rimcl/imaging/render.py to_pixels),
  * so its image point in pixels is the one the NumPy engine images.
  *
  * Required defines: those of trace.cl (RIMCL_PRECISION, RIMCL_FIELD, RIMCL_INTERP,
@@ -67,7 +67,7 @@
 #define CAM_PUPIL_AXIS 4 /* unit viewing axis (x1, x2, x3) */
 #define CAM_PUPIL_CENTRE 7
 #define CAM_PUPIL_RADIUS 10
-/* lens behind a window (RIMCL_CAMERA 2), as rimcl/camera.py LensCamera computes them: */
+/* lens behind a window (RIMCL_CAMERA 2), as rimcl/optics/camera.py LensCamera computes them: */
 #define CAM_WINDOW_DEPTHS 11 /* x1 runs in fluid, glass (the thickness), outside to the pupil */
 #define CAM_WINDOW_RATIOS 14 /* sine ratios 1, n_fluid / n_glass, n_fluid / n_outside */
 #define CAM_WINDOW_SLOPES 17 /* depths * ratios, per medium */

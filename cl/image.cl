@@ -2,8 +2,8 @@
  * image.cl -- tracer images rendered, digitised and located on the device, one row each.
  *
  * The device engine's second stage (DESIGN §14), the NumPy engine's image_batch
- * (rimcl/imaging.py) in one kernel: for each tracer of a batch, from the image points of
- * its rays (fan.cl, in pixels), the window (rimcl/render.py Renderer.window_for: bounding
+ * (rimcl/imaging/frames.py) in one kernel: for each tracer of a batch, from the image points of
+ * its rays (fan.cl, in pixels), the window (rimcl/imaging/render.py Renderer.window_for: bounding
  * box plus the PSF pad, capped at max_window around the floor of the median image point),
  * the image (renderer "exact": each ray's Gaussian integrated over the pixels as
  * differences of ndtr, cut `radius` pixels from the ray, added in ray order, or in the
@@ -11,7 +11,7 @@
  * the rays binned to pixels in ray order, then spread with scipy's normalised Gaussian
  * kernel of `radius`),
  * the counts (scale from the reference pass or from the image's own peak; then the
- * deterministic camera: rint, clip; or, with RIMCL_NOISE, rimcl/sensor.py Sensor.digitize:
+ * deterministic camera: rint, clip; or, with RIMCL_NOISE, rimcl/imaging/sensor.py Sensor.digitize:
  * per pixel the Philox draws of rimcl_philox.h, shot noise, full well, read noise, gain,
  * rint, ADC clip, in the host's order of double operations), the 8-connected components
  * above the threshold (union-find; the root of a component is its smallest pixel index,
@@ -30,7 +30,7 @@
  * Needs cl_khr_fp64.
  * Units: pixels of the camera (pixel i spans [i, i + 1)); light in units of ray weight;
  *   counts of the camera; electrons (e-) of the sensor. Pixel (i, j) of a window is pixel
- *   (col0 + i, row0 + j) of the renderer's grid (rimcl/render.py: origin and pixel size),
+ *   (col0 + i, row0 + j) of the renderer's grid (rimcl/imaging/render.py: origin and pixel size),
  *   the global pixel of the noise draws.
  * Axis order: windows and images are (rows, columns) = (x3, x2); points are (x2, x3).
  * Work-item: one scratch slot (get_global_id); it images one tracer after another, taken
@@ -82,7 +82,7 @@
 #define IMG_GROWTH_STEP 9 /* exp(-64 / sigma^2) */
 #define IMG_KERNEL 10
 
-/* rimcl/sensor.py POISSON_INVERSION_MAX and POISSON_INVERSION_KMAX */
+/* rimcl/imaging/sensor.py POISSON_INVERSION_MAX and POISSON_INVERSION_KMAX */
 #define POISSON_INVERSION_MAX 16.0
 #define POISSON_INVERSION_KMAX 64
 
@@ -90,7 +90,7 @@
 #define RAY_STATUS_MASK 7
 #define RAY_COLLECTED 8 /* as fan.cl */
 
-/* TracerFlag bits (rimcl/centroid.py) */
+/* TracerFlag bits (rimcl/imaging/centroid.py) */
 #define FLAG_NO_RAYS 1
 #define FLAG_BELOW_THRESHOLD 2
 #define FLAG_SPLIT 4
@@ -263,7 +263,7 @@ RIMCL_INLINE void source_factors(const double position, const int size, const in
     const int count = last - first;
     const double8 lanes = (double8)(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
 #if RIMCL_RENDERER == 0
-    /* ndtr at the pixel edges, then differences (rimcl/render.py _render_exact). The
+    /* ndtr at the pixel edges, then differences (rimcl/imaging/render.py _render_exact). The
      * edges a_k = a_0 + k / sigma (in sigmas) are in arithmetic progression, so 8 edges
      * on, exp(-a^2/2) is the last one times exp(-8 a / sigma) exp(-32 / sigma^2), and
      * exp(-8 a / sigma) the last one times exp(-64 / sigma^2): two exponentials per
@@ -285,7 +285,7 @@ RIMCL_INLINE void source_factors(const double position, const int size, const in
         STORE8(((double)i + lanes < (double)count) ? light : (double8)(0.0), factors + i);
     }
 #else
-    /* the binned light spread by the filter's kernel (rimcl/render.py _render_paper) */
+    /* the binned light spread by the filter's kernel (rimcl/imaging/render.py _render_paper) */
     for (int i = 0; i < count; ++i)
         factors[i] = consts[IMG_KERNEL + radius + first + i - cell] * weight;
     for (int i = count; i < (count + 7) / 8 * 8; ++i)
@@ -559,13 +559,13 @@ RIMCL_INLINE int sources_in_tiles(const int rays, __global const uchar *ray_code
 }
 
 #if RIMCL_NOISE
-/* rimcl/sensor.py _box_muller: a standard normal of two uniforms. */
+/* rimcl/imaging/sensor.py _box_muller: a standard normal of two uniforms. */
 RIMCL_INLINE double box_muller(const double u_radius, const double u_angle)
 {
     return sqrt(-2.0 * log(u_radius)) * cos(2.0 * M_PI * u_angle);
 }
 
-/* The counts of one pixel of `light` (unscaled) with the draws `words` (rimcl/sensor.py
+/* The counts of one pixel of `light` (unscaled) with the draws `words` (rimcl/imaging/sensor.py
  * Sensor.digitize and poisson_from_uniforms, the same double operations in the same
  * order); *saturated is set where the full well is reached or the ADC clips. */
 RIMCL_INLINE double sensor_counts(const double light, const double scale, const uint4 words,
@@ -755,7 +755,7 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
 #endif
     flags |= (outside > 0) ? FLAG_RAYS_OUTSIDE_WINDOW : 0;
 
-    /* ---- counts (rimcl/sensor.py Sensor.scale_for, Sensor.digitize) ---- */
+    /* ---- counts (rimcl/imaging/sensor.py Sensor.scale_for, Sensor.digitize) ---- */
     double peak = -INFINITY;
     for (int p = 0; p < w_px * h_px; ++p)
         peak = fmax(peak, image[p]);
@@ -821,7 +821,7 @@ RIMCL_INLINE void image_tracer(const int t, const slot_scratch s, __constant con
         return;
     }
 
-    /* ---- 8-connected components of the pixels above the threshold (rimcl/centroid.py) */
+    /* ---- 8-connected components of the pixels above the threshold (rimcl/imaging/centroid.py) */
     for (int j = aj0; j <= aj1; ++j)
         for (int i = ai0; i <= ai1; ++i)
             labels[j * w_px + i] = (image[j * w_px + i] > threshold) ? j * w_px + i : -1;

@@ -33,7 +33,7 @@
 /* |k x d| below this: d along k, where S1 = S2 (rimcl.mie._PARALLEL_TOLERANCE) */
 #define MIE_PARALLEL_TOLERANCE 1e-9
 
-/* The weight of a ray of unit initial direction d (rimcl/mie.py: weights, _amplitudes). */
+/* The weight of a ray of unit initial direction d (rimcl/imaging/mie.py: weights, _amplitudes). */
 RIMCL_INLINE double mie_weight(__global const double *mie, const int n_terms, const double d[3])
 {
     __global const double *k = mie + MIE_SHEET;

@@ -3,7 +3,7 @@
  *
  * Purpose: ndtr8(a, exp(-a^2/2)) = P(X <= a) for a standard normal X, to a few units in
  * the last place of 1, as scipy.special.ndtr computes it (the exact renderer integrates
- * each ray's Gaussian over pixels as differences of ndtr, as rimcl/render.py does with
+ * each ray's Gaussian over pixels as differences of ndtr, as rimcl/imaging/render.py does with
  * scipy); ndtr_exp, the exponential its caller needs at a few points. Pure
  * arithmetic on double8 vectors, no library calls, so that it runs in vector registers on
  * CPUs (GPUs split the vectors); polynomials by Horner's rule in fused multiply-adds

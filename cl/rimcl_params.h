@@ -3,7 +3,7 @@
  *
  * Purpose: one __constant float array carries every scalar of a trace call, each
  * float64 value as a float32 (hi, lo) pair so that the f64 mode sees it exactly and
- * the float modes use hi. The Python side (rimcl/trace.py, `_param_block`) fills the
+ * the float modes use hi. The Python side (rimcl/optics/trace.py, `_param_block`) fills the
  * same offsets. Axis order of 3-vectors: x1, x2, x3. Units: field length units.
  */
 #ifndef RIMCL_PARAMS_H

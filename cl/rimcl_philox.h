@@ -2,10 +2,10 @@
  * rimcl_philox.h -- counter-based random numbers: Philox-4x32-10 and its uniforms.
  *
  * Purpose: rimcl_philox4x32_10(counter, key), Random123's philox4x32 with 10 rounds
- * (Salmon et al., SC'11), bit-exact with rimcl/sensor.py philox4x32 (32-bit integer
+ * (Salmon et al., SC'11), bit-exact with rimcl/imaging/sensor.py philox4x32 (32-bit integer
  * multiplies and xors only, so every device draws the same words); and, where the device
  * has cl_khr_fp64, rimcl_philox_uniform(w) = (w + 0.5) 2^-32, the uniform in (0, 1) of one
- * output word (rimcl/sensor.py pixel_uniforms). The sensor noise of cl/image.cl draws one
+ * output word (rimcl/imaging/sensor.py pixel_uniforms). The sensor noise of cl/image.cl draws one
  * counter per pixel: (column, row, tracer, 2 frame + pass) under the key
  * (seed mod 2^32, seed div 2^32).
  * Defines: none required. Optional: RIMCL_POCL_FAST (rimcl_inline.h). Kernels: none.

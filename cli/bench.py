@@ -78,7 +78,7 @@ def bench(out_dir, quick, field_path, cases, interps, precisions, pixels, device
     Example:
       rimcl bench --quick --out bench-out
     """
-    from rimcl.bench import bench as run
+    from rimcl.optics.bench import bench as run
 
     def split(text):
         return None if text is None else [item.strip() for item in text.split(",") if item]

@@ -12,7 +12,7 @@ from rimcl.cli.options import handle_errors
 @handle_errors
 def devices(as_json):
     """List OpenCL platforms and devices with their P:D index (for --device)."""
-    from rimcl.device import list_devices
+    from rimcl.core.device import list_devices
 
     found = list_devices()
     if as_json:

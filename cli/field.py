@@ -96,7 +96,7 @@ def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, sheet
       rimcl field synth --grid 64 --frames 16 --frame-dt 0.02 --sheet-velocity 0 \\
           --no-gradient -o many.h5                          # density + sheet velocity
     """
-    from rimcl.flow.synth import history_table, run_synth
+    from rimcl.fields.synth import history_table, run_synth
 
     result = run_synth(
         output,
@@ -180,7 +180,7 @@ def import_(inputs, axes, crop, stride, frames, t0, dt, boundary, period, gradie
       rimcl field import mixing_0285.h5 mixing_0286.h5 -o jhtdb.h5
       rimcl field import cutout.nc --axes z,y,x --crop 0:128,:,: --stride 2 -o jhtdb.h5
     """
-    from rimcl.flow.jhtdb import import_flow
+    from rimcl.fields.jhtdb import import_flow
 
     written = import_flow(
         inputs,
@@ -215,8 +215,8 @@ def info(field_path, as_json, values):
 
     FIELD defaults to the shipped sample.
     """
-    from rimcl.flow import sample_path
-    from rimcl.flow.info import describe_field_file, format_description
+    from rimcl.fields.info import describe_field_file, format_description
+    from rimcl.fields.sample import sample_path
 
     described = describe_field_file(field_path or sample_path(), values=values)
     click.echo(json.dumps(described, indent=2) if as_json else format_description(described))
@@ -266,8 +266,8 @@ def show(field_path, frame, time, plane, at, quantity, case, k_rho, output, over
       rimcl field show -o sample.png
       rimcl field show jhtdb.h5 --case C1 --plane x1x2 -o jhtdb.png
     """
-    from rimcl.flow import sample_path
-    from rimcl.flow.plot import save_figure, slice_figure
+    from rimcl.fields.plot import save_figure, slice_figure
+    from rimcl.fields.sample import sample_path
 
     path = field_path or sample_path()
     options = dict(frame=frame, time=time, plane=plane, at=at, quantity=quantity, case=case,

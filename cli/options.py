@@ -6,7 +6,7 @@ import math
 
 import click
 
-from rimcl.errors import RimclError, first_line
+from rimcl.core.errors import RimclError, first_line
 
 #: Longest error line printed (a message quoting a huge value is cut).
 _LONGEST_MESSAGE = 400

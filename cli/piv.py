@@ -20,7 +20,7 @@ from rimcl.cli.options import (
     seed_option,
     step_option,
 )
-from rimcl.summary import number
+from rimcl.study.summary import number
 
 window_option = click.option(
     "--window",
@@ -112,7 +112,7 @@ def analyze(
     Example:
       rimcl piv analyze run_field_A.tif run_field_B.tif -o vectors.h5 --window 32 --passes 3
     """
-    from rimcl.piv import PivSettings, analyze_files
+    from rimcl.piv.analysis import PivSettings, analyze_files
 
     settings = PivSettings(
         window=window,
@@ -263,16 +263,16 @@ def render(
       rimcl piv render --case C4 --camera pupil --pupil-rays 32 -o water
       rimcl piv analyze water_field_A.tif water_field_B.tif -o water_vectors.h5
     """
-    from rimcl.config import CameraConfig, IntegratorConfig, RunConfig
-    from rimcl.flow.fieldfile import case_arguments
-    from rimcl.piv import PivSettings
-    from rimcl.piv_images import (
+    from rimcl.fields.fieldfile import case_arguments
+    from rimcl.piv.analysis import PivSettings
+    from rimcl.piv.images import (
         PivConfig,
         PivImaging,
         check_outputs,
         run_piv_render,
         write_piv_render,
     )
+    from rimcl.scene.config import CameraConfig, IntegratorConfig, RunConfig
 
     check_outputs(prefix, overwrite)
     piv_config = PivConfig(

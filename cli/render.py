@@ -179,11 +179,11 @@ def render(
                    --view-angle 10 -o pupil.h5
       rimcl render --tracers 50 --frame-image frame.png -o look.h5
     """
-    from rimcl.config import MeasureConfig
-    from rimcl.device import describe_device
-    from rimcl.flow.fieldfile import case_arguments
-    from rimcl.measure import check_frame_image, run_render, write_frame_image, write_render
-    from rimcl.provenance import check_output
+    from rimcl.core.device import describe_device
+    from rimcl.core.provenance import check_output
+    from rimcl.fields.fieldfile import case_arguments
+    from rimcl.ptv.measure import check_frame_image, run_render, write_frame_image, write_render
+    from rimcl.scene.config import MeasureConfig
 
     check_output(output, overwrite)
     if frame_image is not None:

@@ -3,7 +3,7 @@
 import click
 
 from rimcl.cli.options import handle_errors, overwrite_option
-from rimcl.summary import number, percent
+from rimcl.study.summary import number, percent
 
 
 def echo_case_lines(stats):
@@ -53,7 +53,7 @@ def stats(render_files, out_dir, no_figures, overwrite):
     Relative errors are fractions; positions are in units of the traced depth L. Lines
     printed per case: systematic ± random relative error (mean ± std of ε/truth).
     """
-    from rimcl.stats import run_stats
+    from rimcl.stats.compute import run_stats
 
     document = run_stats(render_files, out_dir, overwrite=overwrite, figures=not no_figures)
     echo_case_lines(document)

@@ -117,8 +117,8 @@ def study(
     stats.json, figures/ and summary.md. A rerun skips finished cases; --force redoes
     all. Options override the scene's keys (named in brackets).
     """
-    from rimcl.scene import default_scene_text, load_scene
-    from rimcl.study import run_study
+    from rimcl.scene.load import default_scene_text, load_scene
+    from rimcl.study.run import run_study
 
     if print_default_scene:
         click.echo(default_scene_text(), nl=False)

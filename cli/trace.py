@@ -108,13 +108,13 @@ def trace(
       rimcl trace --case C4 --precision f64 -o water.h5
       rimcl trace --analytic grin --length 100 --fan 8 -o grin.h5
     """
-    from rimcl.device import describe_device, select_device
-    from rimcl.field import Field, analytic_field
-    from rimcl.flow.fieldfile import case_arguments, load_field
-    from rimcl.memory import check_field_upload, check_trace_memory
-    from rimcl.provenance import check_output
-    from rimcl.rays import fan_rays, read_rays, scene_for, write_trace
-    from rimcl.tracing import trace_rays
+    from rimcl.core.device import describe_device, select_device
+    from rimcl.core.memory import check_field_upload, check_trace_memory
+    from rimcl.core.provenance import check_output
+    from rimcl.fields.field import Field, analytic_field
+    from rimcl.fields.fieldfile import case_arguments, load_field
+    from rimcl.optics.rays import fan_rays, read_rays, scene_for, write_trace
+    from rimcl.optics.tracing import trace_rays
 
     check_output(output, overwrite)
     if analytic is not None:

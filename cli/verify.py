@@ -35,7 +35,7 @@ def verify(device_spec, rays, as_json):
     distance (field length units) between traced and exact exit points (image points
     for the uniform medium).
     """
-    from rimcl.verify import run_verification
+    from rimcl.optics.verify import run_verification
 
     widths = (20, 9, 9, 8, 10, 10, 9, 4)
 

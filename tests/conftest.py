@@ -8,14 +8,14 @@ import os
 
 import pytest
 
-from rimcl.errors import RimclError
+from rimcl.core.errors import RimclError
 
 REQUIRE_OPENCL = os.environ.get("RIMCL_REQUIRE_OPENCL") == "1"
 
 
 def _devices():
     try:
-        from rimcl.device import _all_devices, build_problem
+        from rimcl.core.device import _all_devices, build_problem
 
         found = _all_devices()
     except (RimclError, ImportError) as exc:
@@ -25,7 +25,7 @@ def _devices():
     if not devices:
         return [], "no OpenCL device can compile kernels (see 'rimcl devices')"
     if wanted:
-        from rimcl.device import select_device
+        from rimcl.core.device import select_device
 
         devices = [select_device(wanted)]
     return devices, ""
@@ -50,6 +50,6 @@ def device(request):
 
 @pytest.fixture(scope="session")
 def has_fp64(device):
-    from rimcl.device import has_fp64
+    from rimcl.core.device import has_fp64
 
     return has_fp64(device)

@@ -2,7 +2,7 @@
 
 Particle images are pixel-integrated Gaussians (exact, no peak locking), as rimcl's exact
 renderer makes them, but drawn without OpenCL or rays so that the tests stay fast.
-Coordinates follow :mod:`rimcl.piv`: ``x`` along columns, ``y`` along rows, pixel
+Coordinates follow :mod:`rimcl.piv.analysis`: ``x`` along columns, ``y`` along rows, pixel
 ``(i, j)`` covering ``[j, j+1) x [i, i+1)``.
 """
 

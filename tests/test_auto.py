@@ -8,11 +8,11 @@ import pytest
 from tracing_fields import oblique_rays, smooth_field
 
 import rimcl
-from rimcl.calibrate import STEP_FACTORS, calibration_subset
-from rimcl.errors import RimclError
-from rimcl.field import analytic_field
-from rimcl.trace import PAPER_PIXELS, default_step, default_tolerance
-from rimcl.verify import exact_grin
+from rimcl.core.errors import RimclError
+from rimcl.fields.field import analytic_field
+from rimcl.optics.auto_choice import STEP_FACTORS, calibration_subset
+from rimcl.optics.trace import PAPER_PIXELS, default_step, default_tolerance
+from rimcl.optics.verify import exact_grin
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +38,7 @@ def test_interpolation_errors_above_the_tolerance_choose_bspline3(case, device, 
     bspline_error = _candidate(loose, "bspline3", loose["step"])["error"]
     assert bspline_error < trilinear_error / 10
     tolerance = np.sqrt(trilinear_error * bspline_error)
-    with caplog.at_level(logging.INFO, logger="rimcl.calibrate"):
+    with caplog.at_level(logging.INFO, logger="rimcl.optics.auto_choice"):
         result = _trace(case, device, interp="auto", tolerance=tolerance)
     record = result.config["auto"]
     assert record["interp"] == "bspline3" and result.config["interp"] == "bspline3"
@@ -81,7 +81,7 @@ def test_auto_step_takes_the_largest_step_within_the_tolerance(case, device):
 
 
 def test_an_unreachable_tolerance_takes_the_most_accurate_and_says_so(case, device, caplog):
-    with caplog.at_level(logging.WARNING, logger="rimcl.calibrate"):
+    with caplog.at_level(logging.WARNING, logger="rimcl.optics.auto_choice"):
         record = _trace(case, device, interp="auto", tolerance=1e-15).config["auto"]
     assert not record["met"]
     assert record["estimated_error"] == min(c["error"] for c in record["candidates"])

@@ -8,7 +8,8 @@ import pytest
 from click.testing import CliRunner
 
 import rimcl
-from rimcl.bench import (
+from rimcl.cli.main import cli
+from rimcl.optics.bench import (
     CSV_COLUMNS,
     FAIL_F32_DRIFT,
     FAIL_STEP,
@@ -18,7 +19,6 @@ from rimcl.bench import (
     mark_failures,
     synthetic_density,
 )
-from rimcl.cli.main import cli
 
 
 @pytest.fixture(scope="module")
@@ -136,12 +136,12 @@ def test_bench_refuses_unknown_settings(small_field_file, tmp_path, device):
 
 
 def test_without_the_sample_a_synthetic_field_with_its_density_range_stands_in(monkeypatch):
-    import rimcl.flow
+    import rimcl.fields.sample
 
     def missing():
         raise rimcl.RimclError("the shipped sample is missing")
 
-    monkeypatch.setattr(rimcl.flow, "sample_path", missing)
+    monkeypatch.setattr(rimcl.fields.sample, "sample_path", missing)
     field = _load(None, 0.334)
     assert "synthetic" in field.attrs["source"] and field.periodic
     # the mixing flow's densities span 1 to 1.105 (Atwood number 0.05)

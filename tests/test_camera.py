@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from rimcl.camera import PlaneCamera, PupilCamera, Scene, seed_tracers
-from rimcl.errors import RimclError
+from rimcl.core.errors import RimclError
+from rimcl.optics.camera import PlaneCamera, PupilCamera, Scene, seed_tracers
 
 
 def _scene(boundary="clamp"):
@@ -165,7 +165,7 @@ def test_uniform_medium_images_every_ray_to_its_tracer(device, kind):
 @pytest.mark.parametrize("kind", ["plane", "pupil", "lens", "lens behind a window"])
 def test_directions_of_single_rays_equal_the_full_fan_bit_for_bit(kind):
     """camera.directions(tracers, aim_index): the ray sample's directions, made per ray."""
-    from rimcl.camera import FlatWindow, LensCamera
+    from rimcl.optics.camera import FlatWindow, LensCamera
 
     scene = Scene.from_grid((0, 0, 0), (0.1, 0.1, 0.1), (64, 64, 64), "clamp", x_sheet=3.2)
     if kind == "plane":
@@ -188,7 +188,7 @@ def test_lane_order_groups_nearby_aim_points():
     """The device engine's fan kernel gives rays to lanes in lane_order: a permutation of
     the aim points whose aligned groups of 16 are 4 x 4 blocks of a plane camera's grid,
     and compact clusters of a pupil's spiral (whose consecutive points lie far apart)."""
-    from rimcl.engine import lane_order
+    from rimcl.imaging.engine import lane_order
 
     plane = PlaneCamera(_scene(), fan=8)
     order = lane_order(plane)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from rimcl.centroid import TracerFlag, flag_names, locate
-from rimcl.errors import RimclError
+from rimcl.core.errors import RimclError
+from rimcl.imaging.centroid import TracerFlag, flag_names, locate
 
 
 def test_square_block_known_centroid_area_perimeter():

@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from rimcl.errors import RimclError
-from rimcl.flow.crop import CroppedSource
-from rimcl.flow.fieldfile import FieldFile, write_field
-from rimcl.imaging import Imaging, image_batch
-from rimcl.render import Renderer
-from rimcl.scene import load_scene
+from rimcl.core.errors import RimclError
+from rimcl.fields.crop import CroppedSource
+from rimcl.fields.fieldfile import FieldFile, write_field
+from rimcl.imaging.frames import Imaging, image_batch
+from rimcl.imaging.render import Renderer
+from rimcl.scene.load import load_scene
 
 
 @pytest.fixture(scope="module")

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import rimcl
-from rimcl.derivatives import central_difference, gradient, spectral_derivative
-from rimcl.errors import RimclError
+from rimcl.core.errors import RimclError
+from rimcl.fields.derivatives import central_difference, gradient, spectral_derivative
 
 
 def test_spectral_derivative_is_exact_on_trigonometric_fields():

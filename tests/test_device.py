@@ -3,8 +3,8 @@
 import pytest
 
 import rimcl
-from rimcl.device import describe_device, list_devices
-from rimcl.errors import RimclError
+from rimcl.core.device import describe_device, list_devices
+from rimcl.core.errors import RimclError
 
 
 def test_spec_forms_select_the_device(device):
@@ -13,7 +13,7 @@ def test_spec_forms_select_the_device(device):
     assert by_index.name == device.name
     assert rimcl.select_device(device) is device
     part = device.name.strip().split("-")[0]
-    assert not rimcl.device.build_problem(rimcl.select_device(part))
+    assert not rimcl.core.device.build_problem(rimcl.select_device(part))
 
 
 def test_environment_variable_is_used(device, monkeypatch):
@@ -59,14 +59,14 @@ class _FakeDevice:
 def test_the_device_engine_prefers_a_device_with_fp64(monkeypatch):
     """A laptop's integrated GPU without fp64 is the default device, but not the device
     engine's: it takes the first device with fp64 (here the CPU)."""
-    import rimcl.device
+    import rimcl.core.device
 
     igpu, cpu = _FakeDevice("igpu", "gpu", False), _FakeDevice("pocl", "cpu", True)
     found = [(0, 0, igpu), (1, 0, cpu)]
     monkeypatch.delenv("RIMCL_DEVICE", raising=False)
-    monkeypatch.setattr(rimcl.device, "_all_devices", lambda: found)
-    monkeypatch.setattr(rimcl.device, "_usable", lambda devices: devices)
-    assert rimcl.device.select_device() is igpu
-    assert rimcl.device.select_device(need_fp64=True) is cpu
+    monkeypatch.setattr(rimcl.core.device, "_all_devices", lambda: found)
+    monkeypatch.setattr(rimcl.core.device, "_usable", lambda devices: devices)
+    assert rimcl.core.device.select_device() is igpu
+    assert rimcl.core.device.select_device(need_fp64=True) is cpu
     found[1] = (1, 0, _FakeDevice("old", "cpu", False))
-    assert rimcl.device.select_device(need_fp64=True) is igpu  # none has it: the usual order
+    assert rimcl.core.device.select_device(need_fp64=True) is igpu  # none has it: the usual order

@@ -1,4 +1,4 @@
-"""Studies on Dask (rimcl.distributed): the same numbers as one process, on loopback
+"""Studies on Dask (rimcl.study.distributed): the same numbers as one process, on loopback
 LocalClusters, with a worker killed while writing, and after a rerun.
 
 One tiny study (2 cases, 20 tracers in shards of 7, a 6x6 fan, 256 pixels) is measured
@@ -18,8 +18,13 @@ import pytest
 from click.testing import CliRunner
 
 from rimcl.cli.main import cli
-from rimcl.config import MeasureConfig
-from rimcl.distributed import (
+from rimcl.core.errors import RimclError
+from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.sample import sample_path
+from rimcl.ptv.measure import run_render
+from rimcl.scene.config import MeasureConfig
+from rimcl.scene.load import load_scene, scene_text
+from rimcl.study.distributed import (
     KINEMATIC_TABLES,
     _reference_for,
     connect,
@@ -32,12 +37,7 @@ from rimcl.distributed import (
     worker_index,
     write_shard,
 )
-from rimcl.errors import RimclError
-from rimcl.flow import sample_path
-from rimcl.flow.fieldfile import FieldFile
-from rimcl.measure import run_render
-from rimcl.scene import load_scene, scene_text
-from rimcl.study import case_path, run_study
+from rimcl.study.run import case_path, run_study
 
 distributed = pytest.importorskip("distributed")
 
@@ -163,7 +163,7 @@ def test_a_shard_file_holds_its_tables_and_reference(device, tmp_path):
 
 
 def test_a_worker_keeps_the_frames_of_the_latest_case():
-    from rimcl.distributed import _CachedFrames
+    from rimcl.study.distributed import _CachedFrames
 
     with FieldFile(sample_path()) as file:
         frames = _CachedFrames(file, budget=1 << 30)
@@ -217,9 +217,9 @@ class DieWhileWriting(distributed.WorkerPlugin):
         self.case, self.target, self.marker = case, target, marker
 
     def setup(self, worker):
-        import rimcl.measure
+        import rimcl.ptv.measure
 
-        stamp = rimcl.measure.stamp_h5
+        stamp = rimcl.ptv.measure.stamp_h5
 
         def stamp_then_die(h5obj, *args, **kwargs):
             stamp(h5obj, *args, **kwargs)  # the file now holds attributes but no tables
@@ -229,7 +229,7 @@ class DieWhileWriting(distributed.WorkerPlugin):
                     Path(self.marker).write_text(name)
                     os._exit(1)
 
-        rimcl.measure.stamp_h5 = stamp_then_die
+        rimcl.ptv.measure.stamp_h5 = stamp_then_die
 
 
 def test_a_killed_worker_loses_nothing_and_a_rerun_redoes_only_missing_shards(

@@ -13,13 +13,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rimcl.centroid import TracerFlag
-from rimcl.config import MeasureConfig, MieConfig
-from rimcl.device_imaging import image_points
-from rimcl.errors import RimclError
-from rimcl.imaging import Imaging, image_batch
-from rimcl.measure import run_render
-from rimcl.render import FrameImage, Renderer
+from rimcl.core.errors import RimclError
+from rimcl.imaging.centroid import TracerFlag
+from rimcl.imaging.device import image_points
+from rimcl.imaging.frames import Imaging, image_batch
+from rimcl.imaging.render import FrameImage, Renderer
+from rimcl.ptv.measure import run_render
+from rimcl.scene.config import MeasureConfig, MieConfig
 
 PIXEL = 1 / 512  # pixel size of the synthetic clouds (a unit field of view)
 RAYS = 96
@@ -264,15 +264,15 @@ def test_blocks_of_sources_add_the_same_light_as_one_source_at_a_time(device, ki
     """The image kernel adds RIMCL_SPLAT_BLOCK sources per pass over a window: every
     pixel's sum keeps the source order, so the raw images (their peaks and light) are
     those of one source at a time to the last bit."""
-    import rimcl.device_imaging
+    import rimcl.imaging.device
 
     points, usable = _clouds(np.random.default_rng(11))
     weights = np.random.default_rng(12).uniform(0.5, 1.5, size=usable.shape)
     imaging = _imaging(kind, 16, "grey")
     flags = np.zeros(len(points), dtype=np.int64)
     columns = {}
-    for block in (1, 3, rimcl.device_imaging.SPLAT_BLOCK):
-        monkeypatch.setattr(rimcl.device_imaging, "SPLAT_BLOCK", block)
+    for block in (1, 3, rimcl.imaging.device.SPLAT_BLOCK):
+        monkeypatch.setattr(rimcl.imaging.device, "SPLAT_BLOCK", block)
         columns[block] = image_points(
             imaging,
             points,
@@ -296,7 +296,7 @@ def test_normal_cdf_of_the_image_kernel_matches_scipy(device, has_fp64):
     import pyopencl as cl
     from scipy.special import erfcx, ndtr
 
-    from rimcl.program import kernel_dir
+    from rimcl.core.program import kernel_dir
 
     if not has_fp64:
         pytest.skip("the image kernel needs cl_khr_fp64")
@@ -341,13 +341,13 @@ def test_no_ray_sample_gives_empty_ray_tables_on_both_engines(device):
 def test_several_batches_per_frame_match_the_numpy_engine(device, monkeypatch):
     """Batches double-buffered within a frame (the ray sample, noise keys and rows of
     each batch at their tracers): the same result as one batch and as NumPy."""
-    import rimcl.device_imaging
+    import rimcl.imaging.device
 
     options = {**SAMPLE, "device": device, "frames": 2, "ray_sample": 300, "camera": "pupil"}
     one_batch = _render("device", "C3", **options)
-    monkeypatch.setattr(rimcl.device_imaging, "MIN_BATCH_RAYS", 0)
-    monkeypatch.setattr(rimcl.device_imaging, "CPU_SLOTS_PER_CORE", 1)
-    monkeypatch.setattr(rimcl.device_imaging, "GPU_SLOTS_PER_UNIT", 1)
+    monkeypatch.setattr(rimcl.imaging.device, "MIN_BATCH_RAYS", 0)
+    monkeypatch.setattr(rimcl.imaging.device, "CPU_SLOTS_PER_CORE", 1)
+    monkeypatch.setattr(rimcl.imaging.device, "GPU_SLOTS_PER_UNIT", 1)
     split = MeasureConfig.from_options(
         engine="device", frame_image=True, rays_per_batch=64, **options
     )

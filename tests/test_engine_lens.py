@@ -1,6 +1,6 @@
 """The device engine through a lens camera, with and without a flat window (DESIGN §14).
 
-Both engines image the shipped sample through the same :class:`rimcl.camera.LensCamera`:
+Both engines image the shipped sample through the same :class:`rimcl.optics.camera.LensCamera`:
 the device makes the initial directions (behind a window: the same Newton solve as
 ``LensCamera.directions``), refracts the exit rays at both window faces, tests them
 against the pupil and back-projects them onto the focus plane in ``cl/fan.cl``. Flags, ray
@@ -15,12 +15,12 @@ import pytest
 from test_engine import assert_engines_agree
 
 import rimcl
-from rimcl.camera import FlatWindow, LensCamera, Scene
-from rimcl.centroid import TracerFlag
-from rimcl.config import MeasureConfig, RendererConfig
-from rimcl.engine import DeviceEngine
-from rimcl.measure import run_render
-from rimcl.trace import _validate_rays
+from rimcl.imaging.centroid import TracerFlag
+from rimcl.imaging.engine import DeviceEngine
+from rimcl.optics.camera import FlatWindow, LensCamera, Scene
+from rimcl.optics.trace import _validate_rays
+from rimcl.ptv.measure import run_render
+from rimcl.scene.config import MeasureConfig, RendererConfig
 
 # 6.5 µm pixels at M = 0.2 on a 1024-px sensor span the sample's 2π box
 LENGTH_M = 32.5e-6 * 1024 / (2 * np.pi)

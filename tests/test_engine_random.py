@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from test_engine import assert_engines_agree
 
-from rimcl.config import MeasureConfig, MieConfig
-from rimcl.measure import run_render
+from rimcl.ptv.measure import run_render
+from rimcl.scene.config import MeasureConfig, MieConfig
 
 
 def _draw(rng):

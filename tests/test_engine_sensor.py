@@ -1,7 +1,7 @@
 """The device engine's sensor noise and per-image scaling against the NumPy engine.
 
 The device draws each pixel's noise with the host's Philox counters and the host's order
-of float64 operations (rimcl/sensor.py). Its exp, log and cos differ from NumPy's in the
+of float64 operations (rimcl/imaging/sensor.py). Its exp, log and cos differ from NumPy's in the
 last bit for about 1 value in 10 on PoCL, but a count changes only where a value lies
 within that bit of a rounding boundary (about 1e-13 per pixel): no count differed in 8.7
 million lit pixels (1600 tracers, both passes, both renderers, 10/12/16 bits). So the synthetic
@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 from test_engine import PIXEL, SAMPLE, _assert_same, _clouds, assert_engines_agree
 
-from rimcl.centroid import TracerFlag
-from rimcl.config import MeasureConfig, SensorConfig
-from rimcl.device_imaging import image_points
-from rimcl.errors import RimclError
-from rimcl.imaging import Imaging, image_batch
-from rimcl.measure import run_render
-from rimcl.render import FrameImage, Renderer
-from rimcl.sensor import MEASURED_PASS, REFERENCE_PASS, Sensor
+from rimcl.core.errors import RimclError
+from rimcl.imaging.centroid import TracerFlag
+from rimcl.imaging.device import image_points
+from rimcl.imaging.frames import Imaging, image_batch
+from rimcl.imaging.render import FrameImage, Renderer
+from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS, Sensor
+from rimcl.ptv.measure import run_render
+from rimcl.scene.config import MeasureConfig, SensorConfig
 
 FRAME = 3
 FIRST_ID = 1000  # global id of the first tracer (a shard's offset)

@@ -8,9 +8,9 @@ from click.testing import CliRunner
 from PIL import Image
 
 from rimcl.cli.main import cli
-from rimcl.flow import sample_path
-from rimcl.flow.cases import CASES, PAPER_DELTA_N_MAX
-from rimcl.flow.fieldfile import FieldFile, write_field
+from rimcl.fields.cases import CASES, PAPER_DELTA_N_MAX
+from rimcl.fields.fieldfile import FieldFile, write_field
+from rimcl.fields.sample import sample_path
 
 
 def _run(*args):

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from rimcl.derivatives import gradient
-from rimcl.flow.fieldfile import load_field, write_field
+from rimcl.fields.derivatives import gradient
+from rimcl.fields.fieldfile import load_field, write_field
 
 
 def _periodic_grid(counts, lengths):

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 import rimcl
-from rimcl.errors import RimclError
-from rimcl.flow import sample_path
-from rimcl.flow.cases import CASES, PAPER_DELTA_N_MAX, resolve_k_rho
-from rimcl.flow.fieldfile import FieldFile, load_field, write_field
+from rimcl.core.errors import RimclError
+from rimcl.fields.cases import CASES, PAPER_DELTA_N_MAX, resolve_k_rho
+from rimcl.fields.fieldfile import FieldFile, load_field, write_field
+from rimcl.fields.sample import sample_path
 
 SHAPE = (6, 5, 8)  # (n3, n2, n1)
 ORIGIN = (0.5, -1.0, 2.0)

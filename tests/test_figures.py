@@ -11,7 +11,8 @@ from PIL import Image
 from synthetic_budget import write_budget_file
 from synthetic_render import write_render_file
 
-from rimcl.figures import (
+from rimcl.stats.compute import compute_stats, load_render
+from rimcl.stats.figures import (
     FIGURE_NAMES,
     LITERATURE_STUDIES,
     draw_dt_sweep,
@@ -19,7 +20,6 @@ from rimcl.figures import (
     write_dt_sweep_figure,
     write_figures,
 )
-from rimcl.stats import compute_stats, load_render
 
 CASES = (
     ("G=0", 0.0, 0.0, 0.0, 0.0),

@@ -8,10 +8,10 @@ import pytest
 from tracing_fields import luneburg_field, luneburg_rays, oblique_rays, smooth_field
 
 import rimcl
-from rimcl.device import is_pocl
-from rimcl.errors import RimclError
-from rimcl.reference import sample_field, trace_rays_reference
-from rimcl.trace import _texture_image
+from rimcl.core.device import is_pocl
+from rimcl.core.errors import RimclError
+from rimcl.optics.reference import sample_field, trace_rays_reference
+from rimcl.optics.trace import _texture_image
 
 
 def _wave(points):

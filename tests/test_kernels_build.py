@@ -4,8 +4,8 @@ import itertools
 
 import pytest
 
-from rimcl.device import context_for, is_pocl
-from rimcl.program import build_program, get_kernel, kernel_files
+from rimcl.core.device import context_for, is_pocl
+from rimcl.core.program import build_program, get_kernel, kernel_files
 
 
 def _product(**choices):

@@ -1,10 +1,10 @@
-"""The lens camera in physical units (rimcl.camera.LensCamera) against closed forms."""
+"""The lens camera in physical units (rimcl.optics.camera.LensCamera) against closed forms."""
 
 import numpy as np
 import pytest
 
-from rimcl.camera import FlatWindow, LensCamera, PupilCamera, Scene
-from rimcl.errors import RimclError
+from rimcl.core.errors import RimclError
+from rimcl.optics.camera import FlatWindow, LensCamera, PupilCamera, Scene
 
 # a 2π box seen whole by a 2048-px sensor of 6.5 µm pitch at M = 0.2: 66.6 mm on the sheet
 LENGTH_M = 2048 * 6.5e-6 / 0.2 / (2 * np.pi)

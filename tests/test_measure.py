@@ -1,4 +1,4 @@
-"""The synthetic PTV measurement end to end (``rimcl.measure.run_render``), on small fields."""
+"""The synthetic PTV measurement end to end (``rimcl.ptv.measure.run_render``), on small fields."""
 
 import dataclasses
 import json
@@ -8,12 +8,12 @@ import h5py
 import numpy as np
 import pytest
 
-from rimcl.camera import PupilCamera, Scene
-from rimcl.centroid import TracerFlag
-from rimcl.config import FluidConfig, MeasureConfig
-from rimcl.errors import RimclError
-from rimcl.flow.fieldfile import write_field
-from rimcl.measure import merge_results, run_render, write_frame_image, write_render
+from rimcl.core.errors import RimclError
+from rimcl.fields.fieldfile import write_field
+from rimcl.imaging.centroid import TracerFlag
+from rimcl.optics.camera import PupilCamera, Scene
+from rimcl.ptv.measure import merge_results, run_render, write_frame_image, write_render
+from rimcl.scene.config import FluidConfig, MeasureConfig
 
 TIMES = (0.0, 0.01, 0.02)
 OMEGA = 2.0  # solid-body rotation rate of the linear-medium file (rad per time unit)

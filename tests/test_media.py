@@ -1,11 +1,11 @@
-"""Refractive index of water, air and salt water against published values (rimcl.media)."""
+"""Refractive index of water, air and salt water against published values (rimcl.fields.media)."""
 
 import numpy as np
 import pytest
 
-from rimcl import media
-from rimcl.errors import RimclError
-from rimcl.media import Fluid
+from rimcl.core.errors import RimclError
+from rimcl.fields import media
+from rimcl.fields.media import Fluid
 
 
 def _dn_dt(index, temperature_c, step=1e-3):

@@ -4,8 +4,8 @@ turn rays back or out through the side, plain float32 losing small deflections."
 import numpy as np
 
 import rimcl
-from rimcl.trace import LONG_STEP_CELLS, default_step
-from rimcl.verify import exact_linear
+from rimcl.optics.trace import LONG_STEP_CELLS, default_step
+from rimcl.optics.verify import exact_linear
 
 
 def _bump_field(nodes=48, width_cells=1.5, amplitude=1e-3):

@@ -1,12 +1,12 @@
-"""Mie ray weights (rimcl.mie) against miepython and closed forms."""
+"""Mie ray weights (rimcl.imaging.mie) against miepython and closed forms."""
 
 import miepython
 import numpy as np
 import pytest
 
-from rimcl.camera import PlaneCamera, Scene
-from rimcl.errors import RimclError
-from rimcl.mie import MieWeights, ray_weights
+from rimcl.core.errors import RimclError
+from rimcl.imaging.mie import MieWeights, ray_weights
+from rimcl.optics.camera import PlaneCamera, Scene
 
 
 def _fan_directions(count=400):

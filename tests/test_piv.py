@@ -1,4 +1,4 @@
-"""PIV correlation (rimcl.piv) on synthetic pairs of known displacement."""
+"""PIV correlation (rimcl.piv.analysis) on synthetic pairs of known displacement."""
 
 import h5py
 import numpy as np
@@ -7,8 +7,8 @@ from click.testing import CliRunner
 from piv_particles import particle_pair, uniform
 
 from rimcl.cli.main import cli
-from rimcl.errors import RimclError
-from rimcl.piv import (
+from rimcl.core.errors import RimclError
+from rimcl.piv.analysis import (
     PivSettings,
     WindowGrid,
     analyze_pair,

@@ -1,4 +1,4 @@
-"""PIV image pairs through a field (rimcl.piv_images), errors (rimcl.piv_study), figures."""
+"""PIV image pairs through a field (rimcl.piv.images), errors (rimcl.piv.study), figures."""
 
 import dataclasses
 import json
@@ -9,15 +9,13 @@ import pytest
 import tifffile
 from click.testing import CliRunner
 
-from rimcl.camera import PupilCamera, Scene
 from rimcl.cli.main import cli
-from rimcl.config import CameraConfig, RunConfig
-from rimcl.errors import RimclError
-from rimcl.field import Field
-from rimcl.flow.fieldfile import write_field
-from rimcl.measure import uniform_like
-from rimcl.piv import PivSettings, WindowGrid, analyze_pair
-from rimcl.piv_images import (
+from rimcl.core.errors import RimclError
+from rimcl.fields.field import Field
+from rimcl.fields.fieldfile import write_field
+from rimcl.optics.camera import PupilCamera, Scene
+from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair
+from rimcl.piv.images import (
     MOTION_3D,
     MOTION_SHEET,
     PivConfig,
@@ -28,7 +26,9 @@ from rimcl.piv_images import (
     sheet_intensity,
     window_means,
 )
-from rimcl.piv_study import load_piv_case, run_piv_case, write_piv_case
+from rimcl.piv.study import load_piv_case, run_piv_case, write_piv_case
+from rimcl.ptv.measure import uniform_like
+from rimcl.scene.config import CameraConfig, RunConfig
 
 #: 96 px frames, 8 rays per tracer through a pupil, 16 px windows: a case in ~1 s
 SMALL_PIV = PivConfig(imaging=PivImaging(pixels=96), settings=PivSettings(window=16))
@@ -173,7 +173,7 @@ def test_sheet_velocity_moves_tracers_in_plane_only(tmp_path, device):
     moved = positions[1, :, 1:] - positions[0, :, 1:]
     np.testing.assert_allclose(moved, np.tile([0.03, -0.02], (len(moved), 1)), atol=1e-9)
     prefix = tmp_path / "sheet"
-    from rimcl.piv_images import write_piv_render
+    from rimcl.piv.images import write_piv_render
 
     write_piv_render(prefix, result)
     with h5py.File(tmp_path / "sheet_truth.h5") as h5:
@@ -256,7 +256,7 @@ def test_case_file_round_trip(box, device, tmp_path):
 
 
 def test_figures_of_two_cases(box, device, tmp_path):
-    from rimcl.piv_figures import FIGURE_NAMES, write_piv_figures
+    from rimcl.piv.figures import FIGURE_NAMES, write_piv_figures
 
     strong = run_piv_case(box, case="C4", **small(device))
     zero = run_piv_case(box, k_rho=0.0, reference=strong.reference, **small(device))
@@ -281,8 +281,8 @@ def test_figures_of_two_cases(box, device, tmp_path):
 def test_ray_deposit_is_the_exact_renderer():
     from scipy.special import ndtr
 
-    from rimcl.piv_images import deposit_rays
-    from rimcl.render import Renderer
+    from rimcl.imaging.render import Renderer
+    from rimcl.piv.images import deposit_rays
 
     renderer = Renderer("exact", 1.0, (0.0, 0.0), 0.75, 64, 16)
     points = np.array([[10.3, 20.7], [30.5, 12.25], [0.2, 5.0]])  # (column, row)

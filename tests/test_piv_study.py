@@ -8,10 +8,10 @@ import pytest
 from click.testing import CliRunner
 
 from rimcl.cli.main import cli
-from rimcl.errors import RimclError
-from rimcl.piv_study import STUDY_RECORD, configs_from_scene, study_case_path
-from rimcl.scene import load_scene
-from rimcl.study import run_study
+from rimcl.core.errors import RimclError
+from rimcl.piv.study import STUDY_RECORD, configs_from_scene, study_case_path
+from rimcl.scene.load import load_scene
+from rimcl.study.run import run_study
 
 #: two cases on the sample: a handful of PTV tracers, 64 px PIV frames of 4 rays per tracer
 TINY = {
@@ -111,7 +111,7 @@ def test_cli_piv_mode_only(device, tmp_path):
 
 
 def test_verdict_names_the_cases_that_agree_and_those_that_differ():
-    from rimcl.summary import piv_verdict
+    from rimcl.study.summary import piv_verdict
 
     def case(name, ratio, optics):
         both = {"ratio_rms_normalized": ratio, "optics_ratio_rms_normalized": optics}
@@ -126,7 +126,7 @@ def test_verdict_names_the_cases_that_agree_and_those_that_differ():
 
 
 def test_window_blocks_group_the_vectors_one_window_spans():
-    from rimcl.piv_study import window_blocks
+    from rimcl.piv.study import window_blocks
 
     ids, k = window_blocks((5, 7), 0.5)
     assert k == 2 and ids.shape == (5, 7)
@@ -141,7 +141,7 @@ def test_window_blocks_group_the_vectors_one_window_spans():
 def test_vectors_of_overlapping_windows_are_resampled_together():
     """Errors shared by the 2 x 2 vectors of each block (as overlapping windows share
     pixels): resampling vectors one by one would make the interval half as wide."""
-    from rimcl.piv_study import vector_errors, window_blocks
+    from rimcl.piv.study import vector_errors, window_blocks
 
     rng = np.random.default_rng(3)
     ids, _ = window_blocks((40, 40), 0.5)

@@ -11,16 +11,16 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import rimcl.bench
-import rimcl.flow.info
+import rimcl.fields.info
+import rimcl.optics.bench
 from rimcl.cli.main import cli
-from rimcl.errors import RimclError
-from rimcl.field import Field
-from rimcl.flow.fieldfile import write_field
-from rimcl.memory import check_field_upload
-from rimcl.rays import read_rays
-from rimcl.trace import STATUS_NAMES, _finish
-from rimcl.tracing import trace_rays
+from rimcl.core.errors import RimclError
+from rimcl.core.memory import check_field_upload
+from rimcl.fields.field import Field
+from rimcl.fields.fieldfile import write_field
+from rimcl.optics.rays import read_rays
+from rimcl.optics.trace import STATUS_NAMES, _finish
+from rimcl.optics.tracing import trace_rays
 
 # Address space a refusing process may use: the interpreter, NumPy, h5py and click.
 ADDRESS_SPACE = 1536 * 2**20
@@ -166,7 +166,7 @@ def test_any_failure_is_one_line_and_a_traceback_only_with_v(monkeypatch, failur
     def broken(*args, **kwargs):
         raise failure
 
-    monkeypatch.setattr(rimcl.flow.info, "describe_field_file", broken)
+    monkeypatch.setattr(rimcl.fields.info, "describe_field_file", broken)
     line = one_error_line(run("field", "info"))
     assert words in line
     verbose = run("-v", "field", "info")
@@ -248,7 +248,7 @@ def test_a_delta_n_file_renders_and_benchmarks(device, twin_files, tmp_path):
     assert result.exit_code == 0, result.output
     with h5py.File(output, "r") as h5:
         assert h5.attrs["case"] == "delta_n" and np.isnan(h5.attrs["k_rho"])
-    (case,) = rimcl.bench.bench_cases(delta_path, ["C1", "C4"], quick=True)
+    (case,) = rimcl.optics.bench.bench_cases(delta_path, ["C1", "C4"], quick=True)
     assert case.name == "delta_n" and case.k_rho is None
     with h5py.File(delta_path, "r") as h5:
         stored = h5["frames/0000/delta_n"][()]
@@ -261,15 +261,15 @@ def test_bench_never_replaces_earlier_results_on_a_failing_run(tmp_path, monkeyp
         (tmp_path / name).write_text(text)
     line = one_error_line(run("bench", "--out", tmp_path, "--cases", ""))
     assert "name at least one case" in line
-    row = dict.fromkeys(rimcl.bench.CSV_COLUMNS, 0.0)
+    row = dict.fromkeys(rimcl.optics.bench.CSV_COLUMNS, 0.0)
     meta = {"device": {"device": "none"}, "references": {}, "cases": []}
-    monkeypatch.setattr(rimcl.bench, "bench_cases", lambda *a, **k: [])
-    monkeypatch.setattr(rimcl.bench, "run_bench", lambda *a, **k: ([row], dict(meta)))
+    monkeypatch.setattr(rimcl.optics.bench, "bench_cases", lambda *a, **k: [])
+    monkeypatch.setattr(rimcl.optics.bench, "run_bench", lambda *a, **k: ([row], dict(meta)))
 
     def disk_full(*args):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(rimcl.bench, "plot_pareto", disk_full)
+    monkeypatch.setattr(rimcl.optics.bench, "plot_pareto", disk_full)
     line = one_error_line(run("bench", "--out", tmp_path, "--cases", "C1"))
     assert "the disk is full" in line
     for name, text in earlier.items():
@@ -314,8 +314,8 @@ def test_field_info_reads_metadata_only_and_streams_values_on_request(huge_decla
     def no_reading(*args, **kwargs):
         raise AssertionError("field info read frame data")
 
-    monkeypatch.setattr(rimcl.flow.fieldfile.FieldFile, "_read", no_reading)
-    info = rimcl.flow.info.describe_field_file(huge_declared)
+    monkeypatch.setattr(rimcl.fields.fieldfile.FieldFile, "_read", no_reading)
+    info = rimcl.fields.info.describe_field_file(huge_declared)
     assert info["memory_bytes_per_frame"]["field_trilinear"] == 16 * 1024**3
     assert "frames" not in info and "delta_n_max" not in info
 

@@ -18,8 +18,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rimcl.cli.main import cli
-from rimcl.errors import RimclError
-from rimcl.flow.fieldfile import FieldFile, load_field
+from rimcl.core.errors import RimclError
+from rimcl.fields.fieldfile import FieldFile, load_field
 
 #: Examples per property (each runs a few milliseconds to a few tens of milliseconds).
 EXAMPLES = 60

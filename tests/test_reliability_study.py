@@ -16,11 +16,11 @@ import h5py
 import pytest
 from click.testing import CliRunner
 
-from rimcl.case_files import case_path, check_case_file
 from rimcl.cli.main import cli
-from rimcl.errors import RimclError
-from rimcl.scene import load_scene, scene_text
-from rimcl.study import MARKER, run_study
+from rimcl.core.errors import RimclError
+from rimcl.scene.load import load_scene, scene_text
+from rimcl.study.case_files import case_path, check_case_file
+from rimcl.study.run import MARKER, run_study
 
 CASES = ["C0", "C1", "C2"]
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.special import ndtr
 
-from rimcl.centroid import locate
-from rimcl.errors import RimclError
-from rimcl.render import FULL_SCALE, FrameImage, Renderer, Window, quantize, scale_for
+from rimcl.core.errors import RimclError
+from rimcl.imaging.centroid import locate
+from rimcl.imaging.render import FULL_SCALE, FrameImage, Renderer, Window, quantize, scale_for
 
 SIGMA = 2.3
 THRESHOLD = 100

@@ -5,10 +5,10 @@ from pathlib import Path
 
 import numpy as np
 
-from rimcl.camera import Scene, seed_tracers
-from rimcl.flow import sample_path
-from rimcl.flow.fieldfile import FieldFile
-from rimcl.track import (
+from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.sample import sample_path
+from rimcl.optics.camera import Scene, seed_tracers
+from rimcl.ptv.track import (
     SheetVelocity,
     fit_noise_std,
     integrate_tracks,

@@ -6,10 +6,10 @@ import pytest
 from click.testing import CliRunner
 
 from rimcl.cli.main import cli
-from rimcl.errors import RimclError
-from rimcl.flow.fieldfile import FieldFile, write_field
-from rimcl.flow.info import describe_field_file
-from rimcl.flow.synth import BoussinesqSolver
+from rimcl.core.errors import RimclError
+from rimcl.fields.fieldfile import FieldFile, write_field
+from rimcl.fields.info import describe_field_file
+from rimcl.fields.synth import BoussinesqSolver
 
 SHAPE = (6, 5, 8)  # (n3, n2, n1)
 SPACING = (0.25, 0.5, 0.75)

@@ -2,9 +2,9 @@
 
 import pytest
 
-from rimcl.config import MeasureConfig
-from rimcl.errors import RimclError
-from rimcl.scene import (
+from rimcl.core.errors import RimclError
+from rimcl.scene.config import MeasureConfig
+from rimcl.scene.load import (
     SCENE_KEYS,
     default_scene,
     default_scene_text,

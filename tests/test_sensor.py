@@ -1,4 +1,4 @@
-"""The camera sensor (rimcl.sensor): counter-based draws, Poisson sampling, noise scaling."""
+"""The camera sensor (rimcl.imaging.sensor): counter-based draws, Poisson draws, noise."""
 
 import dataclasses
 
@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy.stats import poisson
 
-from rimcl.centroid import locate
-from rimcl.errors import RimclError
-from rimcl.render import Renderer, quantize, scale_for
-from rimcl.sensor import (
+from rimcl.core.errors import RimclError
+from rimcl.imaging.centroid import locate
+from rimcl.imaging.render import Renderer, quantize, scale_for
+from rimcl.imaging.sensor import (
     MEASURED_PASS,
     POISSON_INVERSION_MAX,
     REFERENCE_PASS,
@@ -43,7 +43,7 @@ def test_philox_header_matches_the_host_on_the_opencl_device(device, has_fp64):
     import pyopencl as cl
     import pyopencl.array as cl_array
 
-    from rimcl.program import kernel_dir
+    from rimcl.core.program import kernel_dir
 
     source = r"""
     #if HAS_FP64

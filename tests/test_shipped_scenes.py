@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from rimcl.scene import load_scene
-from rimcl.study import run_study
+from rimcl.scene.load import load_scene
+from rimcl.study.run import run_study
 
 SCENES = sorted((Path(__file__).parents[1] / "data_samples" / "scenes").glob("*.toml"))
 

@@ -9,7 +9,7 @@ import rimcl
 
 pytest.importorskip("numba")
 
-from rimcl.baseline import trace_rays_numba
+from rimcl.optics.baseline import trace_rays_numba
 
 
 @pytest.mark.slow

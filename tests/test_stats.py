@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from synthetic_render import write_render_file
 
-from rimcl.errors import RimclError
-from rimcl.stats import (
+from rimcl.core.errors import RimclError
+from rimcl.stats.compute import (
     angle_deg,
     case_statistics,
     compute_stats,

@@ -6,8 +6,8 @@ import pytest
 from synthetic_budget import write_budget_file
 from synthetic_render import write_render_file
 
-from rimcl.errors import RimclError
-from rimcl.stats import SUMMARY_KEYS, budget_verdict, case_statistics, load_render
+from rimcl.core.errors import RimclError
+from rimcl.stats.compute import SUMMARY_KEYS, budget_verdict, case_statistics, load_render
 
 
 @pytest.fixture(scope="module")

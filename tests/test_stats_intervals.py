@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from synthetic_render import write_render_file
 
-from rimcl.stats import (
+from rimcl.stats.compute import (
     CONVERGENCE_SEED,
     TracerBootstrap,
     case_statistics,

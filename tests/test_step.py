@@ -5,10 +5,10 @@ import pytest
 from tracing_fields import oblique_rays, smooth_field
 
 import rimcl
-from rimcl.errors import RimclError
-from rimcl.field import analytic_field
-from rimcl.trace import LONG_STEP_CELLS, default_step
-from rimcl.verify import exact_grin
+from rimcl.core.errors import RimclError
+from rimcl.fields.field import analytic_field
+from rimcl.optics.trace import LONG_STEP_CELLS, default_step
+from rimcl.optics.verify import exact_grin
 
 
 def _grin_case(count=12):

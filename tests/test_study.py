@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 
-import rimcl.measure
-from rimcl.errors import RimclError
-from rimcl.scene import load_scene
-from rimcl.study import case_path, run_study
+import rimcl.ptv.measure
+from rimcl.core.errors import RimclError
+from rimcl.scene.load import load_scene
+from rimcl.study.run import case_path, run_study
 
 TINY = {
     "cases.names": ["G=0", "C0", "C1", "C2", "C3", "C4"],
@@ -107,7 +107,7 @@ def test_rerun_of_a_finished_study_recomputes_nothing(finished, monkeypatch):
     def must_not_run(*args, **kwargs):
         raise AssertionError("a finished case was measured again")
 
-    monkeypatch.setattr(rimcl.measure, "run_render", must_not_run)
+    monkeypatch.setattr(rimcl.ptv.measure, "run_render", must_not_run)
     again = run_study(scene, out, figures=False)
     assert again.ran == [] and again.skipped == TINY["cases.names"]
     assert not again.stats_redone
@@ -118,7 +118,7 @@ def test_rerun_of_a_finished_study_recomputes_nothing(finished, monkeypatch):
 
 def test_a_killed_study_keeps_finished_cases_and_resumes(device, tmp_path, monkeypatch):
     scene = tiny_scene(device, **{"cases.names": ["C0", "C1", "C2"], "tracers.count": 8})
-    real_run_render = rimcl.measure.run_render
+    real_run_render = rimcl.ptv.measure.run_render
     calls = []
 
     def killed_on_third_case(*args, **kwargs):
@@ -127,7 +127,7 @@ def test_a_killed_study_keeps_finished_cases_and_resumes(device, tmp_path, monke
             raise KeyboardInterrupt
         return real_run_render(*args, **kwargs)
 
-    monkeypatch.setattr(rimcl.measure, "run_render", killed_on_third_case)
+    monkeypatch.setattr(rimcl.ptv.measure, "run_render", killed_on_third_case)
     with pytest.raises(KeyboardInterrupt):
         run_study(scene, tmp_path, figures=False)
     finished_cases = sorted(p.name for p in (tmp_path / "cases").iterdir())

@@ -4,9 +4,9 @@ import pytest
 from synthetic_budget import write_budget_file
 from synthetic_render import write_render_file
 
-from rimcl.scene import load_scene
-from rimcl.stats import compute_stats, load_render
-from rimcl.summary import significant, summary_markdown, with_interval
+from rimcl.scene.load import load_scene
+from rimcl.stats.compute import compute_stats, load_render
+from rimcl.study.summary import significant, summary_markdown, with_interval
 
 
 @pytest.fixture(scope="module")

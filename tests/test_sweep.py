@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from rimcl.config import MeasureConfig, TimeConfig
-from rimcl.flow.fieldfile import write_field
-from rimcl.measure import run_render, write_render
-from rimcl.stats import load_render
-from rimcl.sweep import every_mth_frame
+from rimcl.fields.fieldfile import write_field
+from rimcl.ptv.measure import run_render, write_render
+from rimcl.ptv.sweep import every_mth_frame
+from rimcl.scene.config import MeasureConfig, TimeConfig
+from rimcl.stats.compute import load_render
 
 
 @pytest.fixture(scope="module")

@@ -8,9 +8,9 @@ import pytest
 from click.testing import CliRunner
 
 from rimcl.cli.main import cli
-from rimcl.derivatives import gradient
-from rimcl.flow.fieldfile import FieldFile
-from rimcl.flow.synth import BoussinesqSolver, default_reynolds, synthesize
+from rimcl.fields.derivatives import gradient
+from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.synth import BoussinesqSolver, default_reynolds, synthesize
 
 
 def _coordinates(n):
@@ -83,7 +83,7 @@ def test_buoyancy_makes_heavy_fluid_sink_along_the_chosen_axis():
 
 
 def test_bad_parameters_are_refused():
-    from rimcl.errors import RimclError
+    from rimcl.core.errors import RimclError
 
     for bad in ({"grid": 8}, {"reynolds": -1.0}, {"frames": 0}, {"gravity_axis": "y"}):
         with pytest.raises(RimclError):

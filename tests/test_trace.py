@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 import rimcl
-from rimcl.errors import RimclError
-from rimcl.field import analytic_field
-from rimcl.reference import trace_rays_reference
-from rimcl.verify import exact_fisheye, exact_grin, exact_linear
+from rimcl.core.errors import RimclError
+from rimcl.fields.field import analytic_field
+from rimcl.optics.reference import trace_rays_reference
+from rimcl.optics.verify import exact_fisheye, exact_grin, exact_linear
 
 
 def _fan(count, spread, seed=0):
@@ -18,7 +18,7 @@ def _fan(count, spread, seed=0):
 
 
 def _precisions(device):
-    return ["f32c", "f64"] if rimcl.device.has_fp64(device) else ["f32c"]
+    return ["f32c", "f64"] if rimcl.core.device.has_fp64(device) else ["f32c"]
 
 
 def test_uniform_medium_images_rays_back_to_their_origin(device):
@@ -282,10 +282,10 @@ def test_a_step_larger_than_the_field_is_refused(device):
 
 @pytest.mark.parametrize("boundary", ["periodic", "clamp"])
 def test_straight_rays_are_what_the_integrator_traces_in_a_uniform_field(device, boundary):
-    """rimcl.trace.straight_rays (the reference medium's closed form) against the
+    """rimcl.optics.trace.straight_rays (the reference medium's closed form) against the
     float64 trace: the same status for rays that end well inside, well past the side, or
     move away from the exit plane, and the same exit points and image points."""
-    from rimcl.trace import straight_rays
+    from rimcl.optics.trace import straight_rays
 
     field = rimcl.Field.from_arrays(
         np.zeros((16, 16, 16), dtype=np.float32), spacing=(0.1, 0.1, 0.1), boundary=boundary
@@ -319,7 +319,7 @@ def test_straight_rays_are_what_the_integrator_traces_in_a_uniform_field(device,
 
 
 def test_a_straight_ray_whose_exit_overflows_is_non_finite_never_ok():
-    from rimcl.trace import STATUS_NAMES, straight_rays
+    from rimcl.optics.trace import STATUS_NAMES, straight_rays
 
     field = rimcl.Field.from_arrays(
         np.zeros((4, 4, 4), dtype=np.float32), spacing=(0.1, 0.1, 0.1), boundary="periodic"
@@ -338,8 +338,8 @@ def test_every_kernel_shape_traces_the_same_bits(device, periodic, precision):
     lanes on PoCL, the lane-by-lane one otherwise) are traced exactly as one ray per
     work-item: the same operations in the same order. 37 rays leave some lanes empty;
     rays that leave the box through a side finish while their neighbours keep running."""
-    from rimcl.device import is_pocl
-    from rimcl.trace import KernelShape
+    from rimcl.core.device import is_pocl
+    from rimcl.optics.trace import KernelShape
 
     field = smooth_random_field(3e-3, periodic=periodic, seed=5)
     rng = np.random.default_rng(3)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from rimcl.errors import RimclError
-from rimcl.track import SheetVelocity, first_difference, integrate_tracks, second_difference
+from rimcl.core.errors import RimclError
+from rimcl.ptv.track import SheetVelocity, first_difference, integrate_tracks, second_difference
 
 
 def _nodes(count, lo, hi, periodic):

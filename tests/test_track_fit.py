@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from rimcl.errors import RimclError
-from rimcl.flow.fieldfile import FieldFile, write_field
-from rimcl.track import (
+from rimcl.core.errors import RimclError
+from rimcl.fields.fieldfile import FieldFile, write_field
+from rimcl.ptv.track import (
     SheetVelocity,
     first_difference,
     fit_filters,

@@ -27,7 +27,7 @@ def test_wheel_contains_kernels_and_cli(wheel):
     kernels = {Path(name).name for name in names if name.startswith("rimcl/kernels/")}
     shipped = {p.name for p in (ROOT / "cl").iterdir() if p.suffix in (".cl", ".h")}
     assert shipped and shipped <= kernels
-    assert "rimcl/cli/main.py" in names and "rimcl/trace.py" in names
+    assert "rimcl/cli/main.py" in names and "rimcl/optics/trace.py" in names
     assert any(name.startswith("rimcl-") and name.endswith("entry_points.txt") for name in names)
 
 
@@ -48,8 +48,8 @@ def test_installed_wheel_runs_outside_the_checkout(wheel, tmp_path):
         check=True,
     )
     code = (
-        "import rimcl, rimcl.program, sys; from rimcl.cli.main import cli;"
-        "print(rimcl.__file__); print(rimcl.program.kernel_dir());"
+        "import rimcl, rimcl.core.program, sys; from rimcl.cli.main import cli;"
+        "print(rimcl.__file__); print(rimcl.core.program.kernel_dir());"
         "sys.argv = ['rimcl', '--help']; cli()"
     )
     env = {**os.environ, "PYTHONPATH": str(target)}

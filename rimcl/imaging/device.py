@@ -1,0 +1,483 @@
+"""The device imaging engine's image stage: ``cl/image.cl`` on its host side (DESIGN §14).
+
+:class:`DeviceImager` holds the image kernel, its scratch slots and buffers; for a batch of
+tracers whose rays' image points are on the device (``cl/fan.cl`` of
+:class:`rimcl.imaging.engine.DeviceEngine`, or uploaded by :func:`image_points`), the kernel forms
+each tracer's window, renders it (``exact`` or ``paper``), digitises it (the deterministic
+camera, or the sensor's noise with the host's Philox draws of the same global pixels:
+:mod:`rimcl.imaging.sensor`), finds the 8-connected components above the threshold and the
+brightest one, and returns its integer moments, area, edge flag and perimeter histogram,
+the peak, the light and the light-weighted mean image point; :meth:`DeviceImager.columns`
+turns these rows into the columns of :data:`rimcl.imaging.frames.IMAGE_COLUMNS` with the NumPy
+engine's own arithmetic (centroids are exact integer moments divided once), so where the
+digitised images agree the centroids agree to the last bit.
+
+One work-item images one tracer at a time, sequentially, in its own scratch slot, and
+takes the next tracer from a shared counter: on a CPU a few slots per core, on a GPU
+thousands (batches are enlarged to fill them). No floating-point value is added atomically.
+"""
+
+import math
+
+import numpy as np
+
+from rimcl.core.errors import RimclError
+from rimcl.imaging.centroid import NO_POSITION, TracerFlag
+from rimcl.imaging.frames import empty_columns
+from rimcl.imaging.render import TRUNCATE_SIGMAS
+from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS
+from rimcl.optics.trace import STATUS_NAMES
+
+#: Ray code bit of ``cl/fan.cl``: the ray was collected by the camera.
+RAY_COLLECTED = 8
+
+#: The exact renderer's Gaussian is cut this many σ from the ray: the light left out is
+#: below 7e-16 of the ray's (the NumPy engine integrates over the whole window).
+EXACT_SIGMAS = 8.0
+
+# per-tracer rows of cl/image.cl (ROW_* and ROWD_* there)
+_ROW_FLAGS, _ROW_USABLE, _ROW_STATUS, _ROW_VIGNETTED, _ROW_STEPS = 0, 1, 2, 7, 8
+_ROW_WINDOW, _ROW_OUTSIDE, _ROW_AREA, _ROW_SUM, _ROW_SUM_COL, _ROW_SUM_ROW = 9, 13, 14, 15, 16, 17
+_ROW_COLS, _ROW_ROWS, _ROW_PERIMETER, _ROW_LONGS = 18, 19, 20, 30
+_ROWD_PEAK, _ROWD_SCALE, _ROWD_LIGHT, _ROWD_LIGHT_X, _ROWD_LIGHT_Y, _ROWD_COUNT = 0, 1, 2, 3, 4, 5
+#: Scores of border pixels that have a weight in scikit-image's perimeter (neighborhood=4),
+#: in the order of the kernel's perimeter histogram.
+PERIMETER_SCORES = (5, 7, 13, 15, 17, 21, 23, 25, 27, 33)
+
+#: Tracer images in flight per CPU core (slots taken from a shared counter: balanced).
+CPU_SLOTS_PER_CORE = 4
+#: Tracer images in flight per GPU multiprocessor (one work-item each).
+GPU_SLOTS_PER_UNIT = 256
+#: Work-group size of the image kernel on GPUs.
+GPU_GROUP = 64
+#: Sources (rays, or the paper renderer's pixels) the image kernel adds to a window in one
+#: pass (each pixel loaded and stored once per block; the same sums in the same order).
+SPLAT_BLOCK = 16
+#: Pixels of room in the factor tables for the union of a block's footprints (a block
+#: whose union is wider is added in runs of consecutive sources whose union fits).
+SPLAT_SLACK = 32
+#: Largest share of the device memory the image scratch may take.
+SCRATCH_SHARE = 0.25
+#: Rays per batch up to which batches are enlarged to fill the image slots (about 700 MB of
+#: device memory for the rays' image points, steps and codes).
+MAX_BATCH_RAYS = 1 << 25
+#: Rays per batch below which batches are enlarged (about 30 MB of device memory): the host
+#: work per batch (about 1 ms of Python) then costs a few µs per tracer image, not 100.
+MIN_BATCH_RAYS = 1 << 20
+
+
+def _perimeter_weights():
+    """scikit-image's weights of the 50 border scores (``skimage.measure.perimeter``)."""
+    weights = np.zeros(50, dtype=np.float64)
+    weights[[5, 7, 15, 17, 25, 27]] = 1
+    weights[[21, 33]] = math.sqrt(2)
+    weights[[13, 23]] = (1 + math.sqrt(2)) / 2
+    return weights
+
+
+def _paper_kernel(sigma, radius):
+    """scipy.ndimage's normalised Gaussian of ``gaussian_filter`` (its order-0 kernel)."""
+    x = np.arange(-radius, radius + 1)
+    phi = np.exp(-0.5 / (sigma * sigma) * x**2)
+    return phi / phi.sum()
+
+
+def require_fp64(device):
+    """Refuse a device without ``cl_khr_fp64`` with one clear line."""
+    from rimcl.core.device import has_fp64
+
+    if not has_fp64(device):
+        raise RimclError(
+            f"engine 'device' needs cl_khr_fp64, which {device.name.strip()} lacks; "
+            "use engine 'numpy'"
+        )
+
+
+def profiling_queue(device):
+    """An in-order queue with profiling on ``device`` (kernel times from events)."""
+    import pyopencl as cl
+
+    from rimcl.core.device import context_for
+
+    return cl.CommandQueue(
+        context_for(device), device, properties=cl.command_queue_properties.PROFILING_ENABLE
+    )
+
+
+class DeviceImager:
+    """The image kernel (``cl/image.cl``) with its scratch, for one camera and batch size.
+
+    Parameters
+    ----------
+    imaging : rimcl.imaging.frames.Imaging
+    rays_per_tracer : int
+        ``K``, rays of each tracer.
+    max_tracers : int
+        Largest batch (raised to the number of scratch slots and to
+        :data:`MIN_BATCH_RAYS` rays, at most :data:`MAX_BATCH_RAYS` rays: a GPU needs
+        thousands of tracer images in flight).
+    device : pyopencl.Device
+    queue : pyopencl.CommandQueue
+        An in-order queue with profiling.
+    """
+
+    def __init__(self, imaging, rays_per_tracer, max_tracers, device, queue):
+        import pyopencl as cl
+
+        from rimcl.core.device import context_for, is_pocl
+        from rimcl.core.program import build_program, get_kernel
+
+        require_fp64(device)
+        self.imaging = imaging
+        self.rays = int(rays_per_tracer)
+        self.queue = queue
+        renderer = imaging.renderer
+        sigma = float(renderer.psf_sigma)
+        if renderer.kind == "exact":
+            self.radius = math.ceil(EXACT_SIGMAS * sigma)
+            kernel = np.zeros(0)
+        else:
+            self.radius = int(TRUNCATE_SIGMAS * sigma + 0.5)
+            kernel = _paper_kernel(sigma, self.radius)
+        window = int(renderer.max_window)
+        # a footprint's edges, plus room for the union of a block of nearby footprints
+        self.table_width = (min(2 * self.radius + 2 + SPLAT_SLACK, window + 1) + 15) // 8 * 8
+        cpu = bool(device.type & cl.device_type.CPU)
+        # CPUs: a work-group per slot, so that slots spread over the cores; GPUs: many slots
+        self.group = 1 if cpu else GPU_GROUP
+        context = context_for(device)
+        sensor = imaging.sensor
+        defines = {
+            "RIMCL_RENDERER": 0 if renderer.kind == "exact" else 1,
+            "RIMCL_CENTROID": 0 if imaging.centroid_weights == "excess" else 1,
+            "RIMCL_POCL_FAST": int(is_pocl(device)),
+            "RIMCL_SPLAT_BLOCK": SPLAT_BLOCK,
+        }
+        if sensor.noise:
+            defines["RIMCL_NOISE"] = 1
+        self.kernel = get_kernel(build_program(context, "image.cl", defines), "image_tracers")
+        rw, ro = cl.mem_flags.READ_WRITE, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        # the reference peak: full scale, or with noise peak_electrons (Sensor.scale_for)
+        self.scale_target = float(sensor.peak_electrons if sensor.noise else renderer.full_scale)
+        camera = [sigma, float(imaging.threshold), float(renderer.full_scale), self.scale_target]
+        electrons = [sensor.background_e, sensor.full_well_e, sensor.read_noise_e, sensor.gain]
+        recurrence = [math.exp(-32.0 / sigma**2), math.exp(-64.0 / sigma**2)]  # image.cl
+        consts = np.concatenate([camera, electrons, recurrence, kernel]).astype(np.float64)
+        self.consts = cl.Buffer(context, ro, hostbuf=consts)
+        area = window * window
+        slot_bytes = area * 24 + self.rays * 24 + 16 * SPLAT_BLOCK * self.table_width
+        budget = SCRATCH_SHARE * device.global_mem_size
+        wanted = (CPU_SLOTS_PER_CORE if cpu else GPU_SLOTS_PER_UNIT) * device.max_compute_units
+        self.slots = max(1, min(int(wanted), int(budget // slot_bytes)))
+        if not cpu:
+            self.slots = max(self.group, self.slots // self.group * self.group)
+        fill = min(
+            max(self.slots, MIN_BATCH_RAYS // self.rays), max(1, MAX_BATCH_RAYS // self.rays)
+        )
+        self.max_tracers = max(int(max_tracers), fill)
+        self.scratch = [
+            cl.Buffer(context, rw, size=self.slots * (area + 8) * 8),
+            cl.Buffer(context, rw, size=self.slots * area * 16),
+            cl.Buffer(context, rw, size=self.slots * self.rays * 16),
+            cl.Buffer(context, rw, size=self.slots * self.rays * 8),
+            cl.Buffer(context, rw, size=self.slots * 2 * SPLAT_BLOCK * self.table_width * 8),
+        ]
+        self.counter = cl.Buffer(context, rw, size=4)
+        self.rows_l = cl.Buffer(context, rw, size=self.max_tracers * _ROW_LONGS * 8)
+        self.rows_d = cl.Buffer(context, rw, size=self.max_tracers * _ROWD_COUNT * 8)
+        self.scales = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.max_tracers * 8)
+        self.shared_weights = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.rays * 8)
+        self.ray_weights = None
+        self._weights_key = None
+        self.canvas = None
+        self.canvas_shape = (0, 0)
+        self.threshold_fixed = round(float(imaging.threshold) * 65536)
+        self.perimeter_weights = _perimeter_weights()
+
+    def set_weights(self, weights, n_tracers):
+        """Upload ray weights: a number, ``(K,)`` shared by every tracer, or ``(B, K)``.
+
+        Returns
+        -------
+        (buffer, per_ray) : the weights buffer and whether it holds one weight per ray.
+        """
+        import pyopencl as cl
+
+        weights = np.asarray(weights, dtype=np.float64)
+        if weights.ndim == 2:
+            if weights.shape != (n_tracers, self.rays):
+                raise RimclError(
+                    f"ray weights of shape {weights.shape} do not match {n_tracers} tracers "
+                    f"x {self.rays} rays"
+                )
+            if self.ray_weights is None:
+                self.ray_weights = cl.Buffer(
+                    self.queue.context,
+                    cl.mem_flags.READ_ONLY,
+                    size=self.max_tracers * self.rays * 8,
+                )
+            cl.enqueue_copy(
+                self.queue, self.ray_weights, np.ascontiguousarray(weights), is_blocking=False
+            )
+            return self.ray_weights, 1
+        shared = np.broadcast_to(weights, (self.rays,))
+        key = shared.tobytes()
+        if key != self._weights_key:
+            cl.enqueue_copy(
+                self.queue, self.shared_weights, np.ascontiguousarray(shared), is_blocking=False
+            )
+            self._weights_key = key
+        return self.shared_weights, 0
+
+    def use_canvas(self, shape):
+        """Add every window's counts into a device frame of ``shape = (rows, columns)``."""
+        import pyopencl as cl
+
+        if self.canvas is None or self.canvas_shape != tuple(shape):
+            self.canvas = cl.Buffer(
+                self.queue.context, cl.mem_flags.READ_WRITE, size=max(4, shape[0] * shape[1] * 4)
+            )
+            self.canvas_shape = tuple(shape)
+        cl.enqueue_fill_buffer(self.queue, self.canvas, np.int32(0), 0, shape[0] * shape[1] * 4)
+
+    def read_canvas(self):
+        """The summed counts of the device frame, ``(rows, columns)`` int32."""
+        import pyopencl as cl
+
+        out = np.empty(self.canvas_shape, dtype=np.int32)
+        cl.enqueue_copy(self.queue, out, self.canvas)
+        return out
+
+    @property
+    def own_scale(self):
+        """Whether every image is scaled to its own peak (``per_image`` scaling)."""
+        return self.imaging.scaling == "per_image"
+
+    def enqueue(self, rays, n_tracers, weights, scales=None, canvas=False, noise=None):
+        """Image ``n_tracers`` tracers whose rays are in the device buffers ``rays``.
+
+        Parameters
+        ----------
+        rays : tuple of pyopencl.Buffer
+            ``(ray_pixel, ray_steps, ray_code)`` as ``cl/fan.cl`` writes them.
+        n_tracers : int
+        weights : (pyopencl.Buffer, int)
+            From :meth:`set_weights`.
+        scales : ndarray, shape (n_tracers,), optional
+            The reference pass's scales; None for the reference pass (ignored with
+            ``per_image`` scaling: every image sets its own).
+        canvas : bool
+            Add the counts into the canvas of :meth:`use_canvas`.
+        noise : (int, int, int), optional
+            ``(pass_id, frame, tracer0)`` of a noisy sensor's draws
+            (:class:`rimcl.imaging.sensor.NoiseKey`): tracer ``t`` of the batch draws as the global
+            tracer ``tracer0 + t``.
+
+        Returns
+        -------
+        pyopencl.Event
+            The kernel's event.
+        """
+        import pyopencl as cl
+
+        own_scale = scales is None or self.own_scale
+        stream, tracer0 = self._noise_words(noise, n_tracers)
+        if not own_scale:
+            # non-blocking: the queue keeps the host array until the copy is done
+            host = np.ascontiguousarray(scales, dtype=np.float64)
+            cl.enqueue_copy(self.queue, self.scales, host, is_blocking=False)
+        cl.enqueue_fill_buffer(self.queue, self.counter, np.int32(0), 0, 4)
+        weight_buffer, per_ray = weights
+        canvas_buffer = self.canvas if canvas else self.counter
+        height, width = self.canvas_shape if canvas else (0, 0)
+        renderer = self.imaging.renderer
+        self.kernel.set_args(
+            self.consts,
+            np.int32(n_tracers),
+            np.int32(self.rays),
+            np.int32(renderer.max_window),
+            np.int32(renderer.pad),
+            np.int32(self.radius),
+            np.int32(self.table_width),
+            np.int32(per_ray),
+            np.int32(own_scale),
+            np.int64(self.threshold_fixed),
+            *rays,
+            weight_buffer,
+            self.scales,
+            self.counter,
+            *self.scratch,
+            self.rows_l,
+            self.rows_d,
+            canvas_buffer,
+            np.int32(width),
+            np.int32(height),
+            np.uint32(self.imaging.sensor.seed & 0xFFFFFFFF),
+            np.uint32(self.imaging.sensor.seed >> 32),
+            np.uint32(stream),
+            np.uint32(tracer0),
+        )
+        return cl.enqueue_nd_range_kernel(self.queue, self.kernel, (self.slots,), (self.group,))
+
+    def _noise_words(self, noise, n_tracers):
+        """The kernel's noise stream ``2 frame + pass`` and first tracer (0, 0 without noise),
+        checked as :func:`rimcl.imaging.sensor.pixel_uniforms` checks its key."""
+        if not self.imaging.sensor.noise:
+            return 0, 0
+        if noise is None:
+            raise RimclError("a noisy sensor needs a NoiseKey (pass, frame, tracer) per image")
+        pass_id, frame, tracer0 = (int(v) for v in noise)
+        if pass_id not in (REFERENCE_PASS, MEASURED_PASS) or not 0 <= frame < 1 << 31:
+            raise RimclError(f"bad noise key {noise!r}: pass must be 0 or 1, frame in [0, 2**31)")
+        if not (0 <= tracer0 and tracer0 + n_tracers <= 1 << 32):
+            raise RimclError(f"the tracer ids must be in [0, 2**32), got {tracer0} onwards")
+        return 2 * frame + pass_id, tracer0
+
+    def enqueue_read(self, rows_l, rows_d):
+        """Non-blocking reads of the rows of the last launch into host arrays."""
+        import pyopencl as cl
+
+        first = cl.enqueue_copy(self.queue, rows_l, self.rows_l, is_blocking=False)
+        return [first, cl.enqueue_copy(self.queue, rows_d, self.rows_d, is_blocking=False)]
+
+    @staticmethod
+    def empty_rows(count):
+        """Host arrays for the rows of ``count`` tracers: ``(rows_l, rows_d)``."""
+        return (
+            np.empty((count, _ROW_LONGS), dtype=np.int64),
+            np.empty((count, _ROWD_COUNT), dtype=np.float64),
+        )
+
+    @staticmethod
+    def ray_totals(rows_l):
+        """The rays' status counts ``(5,)``, vignetted rays and steps of a batch's rows."""
+        status = rows_l[:, _ROW_STATUS : _ROW_STATUS + len(STATUS_NAMES)].sum(axis=0)
+        return status, int(rows_l[:, _ROW_VIGNETTED].sum()), int(rows_l[:, _ROW_STEPS].sum())
+
+    def columns(self, rows_l, rows_d, scales=None):
+        """Per-tracer rows → the columns of :data:`rimcl.imaging.frames.IMAGE_COLUMNS`.
+
+        Parameters
+        ----------
+        rows_l : ndarray, int64, shape (B, 30)
+        rows_d : ndarray, float64, shape (B, 5)
+        scales : ndarray, shape (B,), optional
+            The scales the kernel was given (None: the reference pass; ignored with
+            ``per_image`` scaling).
+
+        Returns
+        -------
+        dict of str to ndarray, shape (B,)
+        """
+        renderer = self.imaging.renderer
+        count = len(rows_l)
+        out = empty_columns(count)
+        flags = rows_l[:, _ROW_FLAGS].copy()
+        area = rows_l[:, _ROW_AREA]
+        origin = np.asarray(renderer.origin, dtype=np.float64)
+        pixel_size = renderer.pixel_size
+        light = rows_d[:, _ROWD_LIGHT]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out["x2_opt"] = origin[0] + rows_d[:, _ROWD_LIGHT_X] / light * pixel_size
+            out["x3_opt"] = origin[1] + rows_d[:, _ROWD_LIGHT_Y] / light * pixel_size
+            if scales is None or self.own_scale:
+                # Sensor.scale_for: the peak to full scale, or with noise to peak_electrons
+                scale = self.scale_target / rows_d[:, _ROWD_PEAK]
+                scale[~(rows_d[:, _ROWD_PEAK] > 0)] = np.nan
+            else:
+                scale = np.asarray(scales, dtype=np.float64).copy()
+            out["peak"] = rows_d[:, _ROWD_PEAK] * scale
+        out["scale"] = scale
+        out["n_rays_ok"] = rows_l[:, _ROW_USABLE]
+        out["flags"] = flags
+        found = (flags & int(NO_POSITION)) == 0
+        out["area"] = np.where(found, area, 0)
+        threshold = float(self.imaging.threshold)
+        total = rows_l[:, _ROW_SUM].astype(np.float64)
+        moment_col = rows_l[:, _ROW_SUM_COL].astype(np.float64)
+        moment_row = rows_l[:, _ROW_SUM_ROW].astype(np.float64)
+        if self.imaging.centroid_weights == "excess":
+            total = total - threshold * area
+            moment_col = moment_col - threshold * rows_l[:, _ROW_COLS]
+            moment_row = moment_row - threshold * rows_l[:, _ROW_ROWS]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            col = moment_col / 2 / total
+            row = moment_row / 2 / total
+        pixels = np.stack([rows_l[:, _ROW_WINDOW] + col, rows_l[:, _ROW_WINDOW + 1] + row], axis=-1)
+        positions = renderer.to_sheet(pixels[found])
+        out["x2"][found], out["x3"][found] = positions[:, 0], positions[:, 1]
+        histogram = np.zeros((count, 50), dtype=np.int64)
+        histogram[:, list(PERIMETER_SCORES)] = rows_l[:, _ROW_PERIMETER : _ROW_PERIMETER + 10]
+        for k in np.flatnonzero(found):
+            # as skimage: the histogram of scores times the weights, one dot product
+            out["perimeter"][k] = histogram[k] @ self.perimeter_weights
+        out["circularity"][found] = out["perimeter"][found] ** 2 / (4 * np.pi * area[found])
+        return out
+
+
+def image_points(
+    imaging, points, usable, weights, flags, scales=None, device=None, canvas=None, noise=None
+):
+    """Render, digitise and locate each tracer of a batch on the device.
+
+    The device counterpart of :func:`rimcl.imaging.frames.image_batch`, with its parameters and
+    columns, for image points computed elsewhere (the device pipeline of a measurement
+    makes them on the device instead).
+
+    Parameters
+    ----------
+    imaging : rimcl.imaging.frames.Imaging
+    points : ndarray, float64, shape (B, K, 2)
+    usable : ndarray, bool, shape (B, K)
+    weights : float or ndarray, shape (K,) or (B, K)
+    flags : ndarray, int, shape (B,)
+    scales : ndarray, shape (B,), optional
+    device : str or pyopencl.Device, optional
+    canvas : rimcl.imaging.render.FrameImage, optional
+    noise : (int, int, ndarray), optional
+        ``(pass_id, frame, tracer_ids)`` as :func:`rimcl.imaging.frames.image_batch`; the kernel
+        numbers tracers from the first id, so ``tracer_ids`` must be consecutive.
+
+    Returns
+    -------
+    dict of str to ndarray, shape (B,)
+    """
+    import pyopencl as cl
+
+    from rimcl.core.device import context_for, select_device
+
+    device = select_device(device, need_fp64=True)
+    count, rays = usable.shape
+    first_id = None
+    if noise is not None:
+        ids = np.asarray(noise[2], dtype=np.int64).reshape(-1)
+        if len(ids) != count or (count and np.any(ids != ids[0] + np.arange(count))):
+            raise RimclError("the device engine draws noise for consecutive tracer ids only")
+        first_id = int(ids[0]) if count else 0
+    queue = profiling_queue(device)
+    imager = DeviceImager(imaging, rays, count, device, queue)
+    pixels = imaging.renderer.to_pixels(points.reshape(-1, 2))
+    pixels[~usable.reshape(-1)] = np.nan
+    # unusable rays enter as failed ones; the flags of the caller replace the kernel's
+    code = np.where(usable.reshape(-1), RAY_COLLECTED, 1).astype(np.uint8)
+    context = context_for(device)
+    ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+    buffers = (
+        cl.Buffer(context, ro, hostbuf=np.ascontiguousarray(pixels)),
+        cl.Buffer(context, ro, hostbuf=np.zeros(count * rays, dtype=np.int32)),
+        cl.Buffer(context, ro, hostbuf=code),
+    )
+    if canvas is not None:
+        imager.use_canvas(canvas.counts.shape)
+    key = None if noise is None else (noise[0], noise[1], first_id)
+    weight_arg = imager.set_weights(weights, count)
+    imager.enqueue(buffers, count, weight_arg, scales, canvas is not None, key)
+    rows_l, rows_d = imager.empty_rows(count)
+    cl.wait_for_events(imager.enqueue_read(rows_l, rows_d))
+    out = imager.columns(rows_l, rows_d, scales)
+    known = int(TracerFlag.RAYS_FAILED | TracerFlag.RAYS_VIGNETTED)
+    out["flags"] = (out["flags"] & ~known) | np.asarray(flags, dtype=np.int64)
+    if canvas is not None:
+        total = canvas.counts.astype(np.int64) + imager.read_canvas()
+        canvas.counts[...] = np.minimum(total, canvas.full_scale).astype(np.uint16)
+    return out

@@ -1,0 +1,220 @@
+"""A straightforward float64 numba implementation of the trace, the speed baseline.
+
+The same method as ``cl/trace.cl`` with ``trilinear`` interpolation and a fixed step:
+Sharma's RKN step, Newton on the last step length so that the ray ends on the exit
+plane, the same status rules; one ray per loop iteration, parallel over rays
+(``numba.prange``), everything in float64 except the float32 field nodes (as in the
+kernel). It computes no path integrals, so it does less work per step than the kernel.
+
+:func:`trace_rays_numba` is what ``benchmarks/speed.py`` times against
+:func:`rimcl.trace_rays` (DESIGN §11: only same-run ratios mean anything). numba is an
+optional dependency (``pip install "rimcl[test]"``).
+"""
+
+import math
+
+import numpy as np
+
+from rimcl.core.errors import RimclError
+from rimcl.fields.field import Field
+from rimcl.optics.trace import (
+    _default_max_steps,
+    _finish,
+    _validate_rays,
+    default_step,
+    split_pairs,
+)
+
+_NEWTON_ITERATIONS = 6
+
+
+try:
+    import numba
+    from numba import prange
+except ImportError:  # optional: only the benchmark and its tests need it
+    numba = None
+    prange = range
+
+
+def _jit(cache=True, **options):
+    """numba.njit with an on-disk cache (the first compile takes ~20 s), or nothing."""
+    if numba is None:
+        return lambda function: function
+    return numba.njit(cache=cache, **options)
+
+
+@_jit(inline="always")
+def _cell(u, count, periodic):
+    if periodic:
+        lower = math.floor(u)
+        index = int(lower) % count
+        upper = index + 1 if index + 1 < count else 0
+        return index, upper, u - lower
+    u = min(max(u, 0.0), count - 1.0)
+    index = min(int(u), max(count - 2, 0))
+    return index, min(index + 1, count - 1), u - index
+
+
+@_jit(inline="always")
+def _sample(nodes, origin, inv_h, n_ref, periodic, x1, x2, x3, out):
+    n3, n2, n1, _ = nodes.shape
+    i1, j1, w1 = _cell((x1 - origin[0]) * inv_h[0], n1, periodic)
+    i2, j2, w2 = _cell((x2 - origin[1]) * inv_h[1], n2, periodic)
+    i3, j3, w3 = _cell((x3 - origin[2]) * inv_h[2], n3, periodic)
+    for c in range(4):
+        a00 = nodes[i3, i2, i1, c] + w1 * (nodes[i3, i2, j1, c] - nodes[i3, i2, i1, c])
+        a01 = nodes[i3, j2, i1, c] + w1 * (nodes[i3, j2, j1, c] - nodes[i3, j2, i1, c])
+        a10 = nodes[j3, i2, i1, c] + w1 * (nodes[j3, i2, j1, c] - nodes[j3, i2, i1, c])
+        a11 = nodes[j3, j2, i1, c] + w1 * (nodes[j3, j2, j1, c] - nodes[j3, j2, i1, c])
+        a0 = a00 + w2 * (a01 - a00)
+        a1 = a10 + w2 * (a11 - a10)
+        out[c] = a0 + w3 * (a1 - a0)
+    out[0] += n_ref
+
+
+@_jit(inline="always")
+def _step(nodes, origin, inv_h, n_ref, periodic, r, t, d_a, h, r_out, t_out, s):
+    a = np.empty(3)
+    b = np.empty(3)
+    for k in range(3):
+        a[k] = h * d_a[k]
+    _sample(
+        nodes, origin, inv_h, n_ref, periodic,
+        r[0] + 0.5 * h * t[0] + 0.125 * h * a[0],
+        r[1] + 0.5 * h * t[1] + 0.125 * h * a[1],
+        r[2] + 0.5 * h * t[2] + 0.125 * h * a[2],
+        s,
+    )  # fmt: skip
+    for k in range(3):
+        b[k] = h * s[0] * s[k + 1]
+    _sample(
+        nodes, origin, inv_h, n_ref, periodic,
+        r[0] + h * t[0] + 0.5 * h * b[0],
+        r[1] + h * t[1] + 0.5 * h * b[1],
+        r[2] + h * t[2] + 0.5 * h * b[2],
+        s,
+    )  # fmt: skip
+    for k in range(3):
+        c = h * s[0] * s[k + 1]
+        r_out[k] = r[k] + h * (t[k] + (a[k] + 2.0 * b[k]) / 6.0)
+        t_out[k] = t[k] + (a[k] + 4.0 * b[k] + c) / 6.0
+
+
+def _trace(nodes, origin, inv_h, n_ref, periodic, box_lo, box_hi, r0, d0, x_end, h, limit):
+    count = r0.shape[0]
+    end = np.empty((count, 6))
+    info = np.zeros((count, 2), dtype=np.int32)
+    eps = np.finfo(np.float64).eps
+    for ray in prange(count):
+        s = np.empty(4)
+        r = r0[ray].copy()
+        t = np.empty(3)
+        d_a = np.empty(3)
+        r_new = np.empty(3)
+        t_new = np.empty(3)
+        _sample(nodes, origin, inv_h, n_ref, periodic, r[0], r[1], r[2], s)
+        for k in range(3):
+            t[k] = s[0] * d0[ray, k]
+        offset = r[0] - x_end
+        on_plane = offset == 0.0
+        if on_plane:
+            side = 1.0 if t[0] >= 0.0 else -1.0
+        else:
+            side = 1.0 if offset > 0.0 else -1.0
+        status = -1
+        steps = 0
+        while status < 0:
+            if steps >= limit:
+                status = 3
+                break
+            for k in range(3):
+                d_a[k] = s[0] * s[k + 1]
+            _step(nodes, origin, inv_h, n_ref, periodic, r, t, d_a, h, r_new, t_new, s)
+            steps += 1
+            new_offset = r_new[0] - x_end
+            if not (np.all(np.isfinite(r_new)) and np.all(np.isfinite(t_new))):
+                status = 4
+            elif side * new_offset <= 0.0:
+                hk = h * offset / (offset - new_offset)
+                for _ in range(_NEWTON_ITERATIONS):
+                    _step(nodes, origin, inv_h, n_ref, periodic, r, t, d_a, hk, r_new, t_new, s)
+                    dh = (r_new[0] - x_end) / t_new[0]
+                    if not abs(dh) > 4.0 * eps * hk:
+                        break
+                    hk = min(max(hk - dh, 0.0), h)
+                status = 0
+            r[:] = r_new
+            t[:] = t_new
+            offset = new_offset
+            if status >= 0:
+                break
+            for k in range(3):
+                if r[k] < box_lo[k] or r[k] > box_hi[k]:
+                    status = 1
+            if status < 0 and not on_plane and -side * t[0] <= 0.0:
+                status = 2
+            if status < 0:
+                _sample(nodes, origin, inv_h, n_ref, periodic, r[0], r[1], r[2], s)
+        end[ray, :3] = r
+        end[ray, 3:] = t
+        info[ray, 0] = steps
+        info[ray, 1] = status
+    return end, info
+
+
+_trace_parallel = _jit(parallel=True)(_trace)
+# not cached: numba's disk cache keys a function by its name and signature, not by
+# `parallel`, so a cached serial build of _trace was loaded as the parallel one
+_trace_serial = _jit(cache=False)(_trace)
+
+
+def trace_rays_numba(
+    field, origins, directions, *, x_end, step=None, max_steps=None, parallel=True
+):
+    """Trace rays like :func:`rimcl.trace_rays` (trilinear, fixed step) in numba float64.
+
+    Parameters
+    ----------
+    field : Field
+    origins, directions : array_like, shape (N, 3)
+    x_end : float
+    step : float, optional
+        Step in ``t``; default :func:`rimcl.optics.trace.default_step`.
+    max_steps : int, optional
+    parallel : bool
+        Parallel over rays on all cores (the baseline); False compiles in a third of
+        the time (7 s against 17 s), for tests of the method.
+
+    Returns
+    -------
+    TraceResult
+        Path integrals are not computed (path length zero, ``n_metric`` NaN).
+    """
+    if not isinstance(field, Field):
+        raise RimclError("the numba baseline traces gridded fields only")
+    origins, directions = _validate_rays(origins, directions)
+    step = default_step(field) if step is None else float(step)
+    if max_steps is None:
+        max_steps = _default_max_steps(field, step, x_end, origins, directions)
+    if numba is None:
+        raise RimclError('the numba baseline needs numba: pip install "rimcl[test]"')
+    end, info = (_trace_parallel if parallel else _trace_serial)(
+        field.packed,
+        field.origin,
+        1.0 / field.spacing,
+        field.n_ref,
+        field.periodic,
+        np.asarray(field.box_lo, dtype=np.float64),
+        np.asarray(field.box_hi, dtype=np.float64),
+        origins,
+        directions,
+        float(x_end),
+        step,
+        int(max_steps),
+    )
+    # the exit state as the kernel writes it: float64 values in float32 (hi, lo) pairs
+    raw = np.zeros((len(origins), 17), dtype=np.float32)
+    raw[:, 0:3], raw[:, 3:6] = split_pairs(end[:, :3])
+    raw[:, 6:9], raw[:, 9:12] = split_pairs(end[:, 3:])
+    config = {"x_end": float(x_end), "step": step, "interp": "trilinear", "precision": "numba-f64"}
+    return _finish(origins, directions, raw, info, step, config)

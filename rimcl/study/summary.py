@@ -1,0 +1,538 @@
+"""The Markdown summary of a study (``summary.md``): headline numbers with their intervals.
+
+The headline is the set of statistics that converge with the number of tracers:
+``rms(ε)/rms(truth)``, the median and interquartile range of ``ε/truth``, and the same over
+the tracers whose truth is not small. The paper's mean and standard deviation of
+``ε/truth`` follow, labelled as the paper's, with a mark on those that keep growing with
+the number of tracers (:func:`rimcl.stats.compute.not_converged`). Every value is printed with its
+bootstrap 95 % interval, and a statistic of an empty sample reads ``n/a``.
+"""
+
+import math
+from datetime import datetime, timezone
+
+from rimcl import __version__
+
+PAPER_SOURCE = (
+    "H. Li, A. Fischer, M. Avila, D. Xu, *Measurement error of tracer-based velocimetry in "
+    "single-phase turbulent flows with inhomogeneous refractive indices*"
+)
+#: The paper's values for air (C1) and water (C4), as its text states them, with where.
+#: Relative errors in percent; the position error is an order of magnitude only.
+PAPER_VALUES = {
+    "C1": {
+        "fluid": "air",
+        "delta_n_max": "2.40e-5",
+        "position_peak_over_L": "O(1e-4)",
+        "velocity_systematic": "≈ 0.2 %",
+        "velocity_random": "≈ 2 %",
+        "acceleration_systematic": "≈ 1 %",
+        "acceleration_random": "≈ 300 %",
+    },
+    "C4": {
+        "fluid": "water",
+        "delta_n_max": "2.85e-2",
+        "position_peak_over_L": "O(1e-2)",
+        "velocity_systematic": "≈ 10 %",
+        "velocity_random": "≈ 2000 %",
+        "acceleration_systematic": "≈ 500 %",
+        "acceleration_random": "≈ 1e5 %",
+    },
+}
+PAPER_CITATIONS = (
+    "Δn_max: Table 2 (tab:cases). Position error: Sec. 4.2 (sec:position), 'for the air "
+    "flow (C1), the magnitudes of position error are up to O(10^-4 L) ... for the water "
+    "flow (C4) ... O(10^-2 L)'. Velocity: Sec. 4.3 (sec:velocity), mean and standard "
+    "deviation of ε_u3/u3, 'approximately 0.2 % and about 2 %' (air), '10 %' and 'about "
+    "2000 %' (water). Acceleration: Sec. 4.4 (sec:acceleration), 'about 1 % and 300 %' "
+    "(air), 'about 500 % and 10^5 %' (water); also the Conclusions."
+)
+#: Mark of a statistic that keeps growing with the number of tracers.
+NOT_CONVERGED = "†"
+#: Kinematic quantities of the tables: (stats key, component, heading).
+QUANTITIES = (
+    ("velocity", "u3", "Velocity u3, forward differences (the paper's)"),
+    ("velocity_fit", "u3", "Velocity u3, sliding polynomial fit"),
+    ("acceleration", "a3", "Acceleration a3, three-point differences (the paper's)"),
+    ("acceleration_fit", "a3", "Acceleration a3, sliding polynomial fit"),
+)
+
+
+def significant(value, digits=3):
+    """``value`` to ``digits`` significant digits, without an exponent between 1e-3 and
+    1e6 (``2134`` reads ``2130``, not ``2.13e+03``)."""
+    if value == 0 or not 1e-3 <= abs(value) < 1e6:
+        return f"{value:.{digits}g}"
+    decimals = digits - 1 - math.floor(math.log10(abs(value)))
+    return f"{round(value, decimals):.{max(decimals, 0)}f}"
+
+
+def percent(value):
+    """A fraction as percent with 3 significant digits, ``n/a`` for ``None``."""
+    return "n/a" if value is None else f"{significant(100 * value)} %"
+
+
+def number(value):
+    """A number with 3 significant digits, ``n/a`` for ``None``."""
+    return "n/a" if value is None else f"{value:.3g}"
+
+
+def with_interval(value, interval, scale=1.0, unit=""):
+    """``value [lo, hi]``: 3 significant digits for the value, 2 for the interval's ends.
+
+    Parameters
+    ----------
+    value : float or None
+    interval : [float, float] or None
+    scale : float
+        Factor applied to all three (100 for percent).
+    unit : str
+        Appended after the interval (``" %"``).
+    """
+    if value is None:
+        return "n/a"
+    text = significant(scale * value)
+    if interval is not None:
+        text += f" [{significant(scale * interval[0], 2)}, {significant(scale * interval[1], 2)}]"
+    return text + unit
+
+
+def _percent_of(summary, key):
+    return with_interval(summary[key], summary["ci95"][key], 100.0, " %")
+
+
+def _marked(case, path, text):
+    """``text`` with the not-converged mark when ``path`` is listed for the case."""
+    growing = case.get("convergence", {}).get("not_converged", [])
+    return f"{text} {NOT_CONVERGED}" if path in growing else text
+
+
+def _table(header, rows):
+    """A Markdown table; a ``|`` inside a cell (``|ε_x|``) is escaped."""
+
+    def line(cells):
+        return "| " + " | ".join(cell.replace("|", "\\|") for cell in cells) + " |"
+
+    return [line(header), "|" + "---|" * len(header), *(line(row) for row in rows)]
+
+
+def _case_row(case):
+    """The paper's statistics of one case: position peak, u3 and a3 mean and spread."""
+    velocity, acceleration = case["velocity"]["u3"], case["acceleration"]["a3"]
+    return [
+        case["name"],
+        number(case["G"]),
+        number(case["delta_n_max"]),
+        f"{case['n_used']}/{case['n_tracers']}",
+        with_interval(
+            case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
+        ),
+        _marked(case, "velocity.u3.systematic", _percent_of(velocity, "systematic")),
+        _marked(case, "velocity.u3.random", _percent_of(velocity, "random")),
+        _marked(case, "acceleration.a3.systematic", _percent_of(acceleration, "systematic")),
+        _marked(case, "acceleration.a3.random", _percent_of(acceleration, "random")),
+    ]
+
+
+def _headline_rows(cases, group, component):
+    rows = []
+    for case in cases:
+        summary = case[group][component]
+        conditioned = summary["conditioned"]
+        baseline = case["baseline"][group][component]
+        path = f"{group}.{component}"
+        rows.append(
+            [
+                case["name"],
+                _marked(case, f"{path}.rms_normalized", _percent_of(summary, "rms_normalized")),
+                _marked(case, f"{path}.median", _percent_of(summary, "median")),
+                _marked(case, f"{path}.iqr", _percent_of(summary, "iqr")),
+                _marked(
+                    case,
+                    f"{path}.conditioned_rms_normalized",
+                    _percent_of(conditioned, "rms_normalized"),
+                ),
+                _marked(case, f"{path}.conditioned_median", _percent_of(conditioned, "median")),
+                _marked(case, f"{path}.conditioned_iqr", _percent_of(conditioned, "iqr")),
+                f"{conditioned['n']}/{summary['n']}",
+                _percent_of(baseline, "rms_normalized"),
+            ]
+        )
+    return rows
+
+
+def _budget_lines(cases):
+    with_budget = [case for case in cases if "optics" in case]
+    if not with_budget:
+        return []
+    lines = [
+        "## Error budget: optics, imaging, total, baseline",
+        "",
+        "*Optics*: the light-weighted mean of the traced ray image points (no pixels) "
+        "through the field against a uniform medium; *imaging*: what the renderer, the "
+        "threshold and the centroid add (total minus optics); *baseline*: finite "
+        "differences and rendering without refraction. Velocity u3: rms(ε)/rms(u3).",
+        "",
+    ]
+    header = [
+        "case",
+        "median |ε_x|/L: optics",
+        "imaging",
+        "total",
+        "u3: optics",
+        "imaging",
+        "total",
+        "baseline",
+    ]
+    rows = []
+    for case in with_budget:
+        parts = (case["optics"], case["imaging"], case)
+        row = [case["name"]]
+        row += [
+            with_interval(
+                part["position_error_median_over_L"],
+                part["position_error_median_over_L_ci95"],
+            )
+            for part in parts
+        ]
+        row += [
+            _percent_of(part["velocity"]["u3"], "rms_normalized")
+            for part in (*parts, case["baseline"])
+        ]
+        rows.append(row)
+    lines += _table(header, rows)
+    verdicts = [case["budget_verdict"]["text"] for case in with_budget if case["budget_verdict"]]
+    lines += ["", "Which part dominates:", ""] + [f"- {line}" for line in verdicts]
+    return [*lines, ""]
+
+
+def _convergence_lines(cases):
+    lines = [
+        "## Convergence with the number of tracers",
+        "",
+        f"`{NOT_CONVERGED}` marks a statistic that keeps growing with the number of tracers "
+        "N: its magnitude grows over N/4 < N/2 < N (nested random subsamples) and its value "
+        "at N lies outside the 95 % interval at N/4. Such a number describes the slowest "
+        "tracers of this sample, not the measurement; `stats.json` holds every statistic "
+        "against N under `convergence`, and `figures/convergence.png` draws them.",
+        "",
+    ]
+    for case in cases:
+        growing = case.get("convergence", {}).get("not_converged", [])
+        names = ", ".join(f"`{name}`" for name in growing) if growing else "none"
+        lines.append(f"- {case['name']}: not converged: {names}")
+    return [*lines, ""]
+
+
+def _physical_lines(cases):
+    """What each case's Δn_max means in air, water and salt water (DESIGN §16)."""
+    if not all("physical_equivalent" in case for case in cases):
+        return []
+    lines = [
+        "## What the cases are physically",
+        "",
+        "The temperature (or salt) difference between the light and the heavy fluid that gives "
+        "each case's Δn_max (IAPWS 1997 water, Ciddor 1996 air, Quan & Fry 1995 salt water).",
+        "",
+    ]
+    for case in cases:
+        equivalents = case["physical_equivalent"]
+        lines.append(
+            f"- {case['name']} (Δn_max {number(case['delta_n_max'])}): "
+            + "; ".join(equivalents[name] for name in ("air", "water", "saltwater"))
+        )
+    return [*lines, ""]
+
+
+def _dt_sweep_lines(sweep):
+    """Where refraction rises above the baseline as the frames move apart."""
+    if not sweep:
+        return []
+    dts = ", ".join(f"{dt:g}" for dt in sweep["dt"])
+    lines = [
+        "## Frame spacing: when refraction dominates",
+        "",
+        f"The same tracks sampled every m-th frame (Δt = {dts}); `figures/dt_sweep.png` draws "
+        "the refraction error and the baseline against Δt. Δt at which rms(ε)/rms(truth) of "
+        "refraction exceeds the baseline's:",
+        "",
+    ]
+    for name, quantities in sweep["cases"].items():
+        parts = []
+        for quantity, entry in quantities.items():
+            where = entry["refraction_dominates_dt"]
+            parts.append(f"{quantity}: " + (", ".join(f"{dt:g}" for dt in where) or "none"))
+        lines.append(f"- {name}: " + "; ".join(parts))
+    return [*lines, ""]
+
+
+def summary_markdown(stats, scene):
+    """The study's summary as Markdown, beside the paper's values for air and water.
+
+    Parameters
+    ----------
+    stats : dict
+        The ``stats.json`` document.
+    scene : dict
+        The scene of the study.
+
+    Returns
+    -------
+    str
+    """
+    if scene["run"]["mode"] == "piv":
+        return "\n".join([f"# rimcl study: {len(stats['cases'])} cases, PIV", *piv_lines(stats)])
+    cases = stats["cases"]
+    first = cases[0]
+    camera = scene["camera"]
+    rays = (
+        f"plane camera, {camera['fan']}×{camera['fan']} rays per tracer"
+        if camera["kind"] == "plane"
+        else f"{camera['kind']} camera, {camera['pupil_rays']} rays per tracer"
+    )
+    field = scene["field"]["path"] or "the shipped 64³ sample (buoyancy-driven mixing)"
+    stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    devices = ", ".join(
+        sorted({str(entry.get("device", {}).get("device")) for entry in stats["config"]["inputs"]})
+    )
+    lines = [
+        f"# rimcl study: {len(cases)} cases",
+        "",
+        f"rimcl {__version__}, {stamp}. Field: {field}. {scene['tracers']['count']} tracers, "
+        f"{rays}, {scene['renderer']['kind']} renderer, {scene['renderer']['pixels']} pixels "
+        f"across the field of view (pixel = {first['pixel_size_over_L']:.3g} L), "
+        f"L = {first['length_L']:.4g}, Δt = {first['dt']:.3g}.",
+        f"Device: {devices}. Configuration: `scene.toml`; every number and the software "
+        "versions: `stats.json`; figures with their data: `figures/`.",
+        "",
+        "## Headline: statistics that converge",
+        "",
+        "Errors from refraction only: position `ε_x = x' − x^ref`, velocity "
+        "`ε_u = u' − u^ref`, acceleration `ε_a = a' − a^ref` (measured through the field "
+        "minus measured through a uniform medium), relative to the true value, in percent "
+        "(`stats.json` holds fractions). Each value is followed by its bootstrap 95 % "
+        "interval [lo, hi] (tracers resampled with replacement). *Truth not small*: the "
+        "tracers with |truth| ≥ ½ rms(truth), where ε/truth has no near-zero denominators. "
+        "*Baseline*: finite differences and rendering without refraction (`u^ref − u`), "
+        "which every PTV measurement has.",
+        "",
+    ]
+    header = ["case", "G = Kρ", "Δn_max", "tracers used", "peak |ε_x| / L", "median |ε_x| / L"]
+    rows = [
+        [
+            case["name"],
+            number(case["G"]),
+            number(case["delta_n_max"]),
+            f"{case['n_used']}/{case['n_tracers']}",
+            with_interval(
+                case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
+            ),
+            with_interval(
+                case["position_error_median_over_L"],
+                case.get("position_error_median_over_L_ci95"),
+            ),
+        ]
+        for case in cases
+    ]
+    lines += [*_table(header, rows), ""]
+    for group, component, heading in QUANTITIES:
+        if not all(group in case for case in cases):
+            continue
+        symbol = component
+        header = [
+            "case",
+            f"rms(ε)/rms({symbol})",
+            f"median ε/{symbol}",
+            f"IQR ε/{symbol}",
+            "truth not small: rms ratio",
+            "median",
+            "IQR",
+            "tracers: not small/all",
+            "baseline rms ratio",
+        ]
+        lines += [f"**{heading}**", "", *_table(header, _headline_rows(cases, group, component))]
+        lines.append("")
+    lines += _budget_lines(cases)
+    lines += [
+        "## The paper's statistics",
+        "",
+        "*Systematic* = mean of `ε/truth`, *random* = its standard deviation: the paper's "
+        "definitions, for the `x3` components, in percent, with bootstrap 95 % intervals. "
+        "Both are ratios whose denominators come close to zero for some tracers, so they "
+        f"are dominated by the few slowest tracers; `{NOT_CONVERGED}` marks the ones that "
+        "keep growing with the number of tracers.",
+        "",
+    ]
+    header = [
+        "case",
+        "G = Kρ",
+        "Δn_max",
+        "tracers used",
+        "position-error peak / L",
+        "u3 systematic",
+        "u3 random",
+        "a3 systematic",
+        "a3 random",
+    ]
+    lines += _table(header, [_case_row(case) for case in cases])
+    excluded = [
+        f"{case['name']}: "
+        + (", ".join(f"{n} {name}" for name, n in case["n_excluded"].items() if n) or "none")
+        for case in cases
+    ]
+    lines += ["", "Tracers left out (a tracer may carry several flags): " + "; ".join(excluded)]
+    lines += ["", *_convergence_lines(cases)]
+    lines += _physical_lines(cases)
+    lines += _dt_sweep_lines(stats.get("dt_sweep"))
+    lines += [
+        "## Against the paper (air C1, water C4)",
+        "",
+        "**The flows differ.** The paper traced a 1024³ JHTDB direct numerical simulation "
+        "of homogeneous buoyancy-driven turbulence (Re = 12500) over its own depth L, with "
+        "1e5 tracers, 100×100 rays each and 8192² pixels; this study uses the field, depth "
+        "and sizes above. Only orders of magnitude and trends with G can agree; no "
+        "agreement of the numbers themselves is expected.",
+        "",
+    ]
+    by_name = {case["name"]: case for case in cases}
+    header = [
+        "",
+        "Δn_max",
+        "position-error peak / L",
+        "velocity systematic",
+        "velocity random",
+        "acceleration systematic",
+        "acceleration random",
+    ]
+    rows = []
+    for name, paper in PAPER_VALUES.items():
+        rows.append(
+            [
+                f"paper, {paper['fluid']} ({name})",
+                paper["delta_n_max"],
+                paper["position_peak_over_L"],
+                paper["velocity_systematic"],
+                paper["velocity_random"],
+                paper["acceleration_systematic"],
+                paper["acceleration_random"],
+            ]
+        )
+        case = by_name.get(name)
+        if case is None:
+            rows.append([f"rimcl, {name}", *["not run"] * 6])
+        else:
+            row = _case_row(case)
+            rows.append([f"rimcl, {name}", row[2], row[4], *row[5:]])
+    lines += _table(header, rows)
+    lines += ["", f"Paper: {PAPER_SOURCE}. Where: {PAPER_CITATIONS}", ""]
+    return "\n".join(lines + piv_lines(stats))
+
+
+#: PIV and PTV refraction errors of a case "agree" when the ratio of their
+#: rms(ε_|u|)/rms(|u|) lies within this factor either way.
+PIV_AGREEMENT_FACTOR = 2.0
+
+
+def _agreement(stats, key):
+    """Cases whose PIV/PTV ratio ``key`` of ``|u|`` lies within the factor, and the others."""
+    agree, differ = [], []
+    for case in stats["cases"]:
+        ratio = case.get("piv_vs_ptv", {}).get("magnitude", {}).get(key)
+        if ratio is not None:
+            within = 1 / PIV_AGREEMENT_FACTOR <= ratio <= PIV_AGREEMENT_FACTOR
+            (agree if within else differ).append(f"{case['name']} ({significant(ratio, 2)})")
+    return agree, differ
+
+
+def _agreement_sentence(agree, differ, what):
+    factor = f"a factor {PIV_AGREEMENT_FACTOR:g}"
+    if not differ:
+        return f"{what} **agree** within {factor} in every case: {', '.join(agree)}."
+    if not agree:
+        return f"{what} **differ** by more than {factor}: {', '.join(differ)}."
+    return (
+        f"{what} **agree** within {factor} in {', '.join(agree)} and **differ** in "
+        f"{', '.join(differ)}."
+    )
+
+
+def piv_verdict(stats):
+    """One line: do the PIV and PTV refraction errors of ``|u|`` agree, case by case (and
+    their optics parts, where the PTV cases have them)?"""
+    agree, differ = _agreement(stats, "ratio_rms_normalized")
+    if not agree and not differ:
+        return 'No PTV case to compare with (run.mode = "piv").'
+    line = "**Verdict:** " + _agreement_sentence(
+        agree, differ, "PIV and PTV errors (PIV/PTV of rms(ε_|u|)/rms(|u|))"
+    )
+    agree, differ = _agreement(stats, "optics_ratio_rms_normalized")
+    if agree or differ:
+        line += " " + _agreement_sentence(agree, differ, "Their optics parts (rays only)")
+    return line
+
+
+def piv_lines(stats):
+    """The PIV section of ``summary.md`` (no lines without PIV results): what was
+    measured, the errors per case beside PTV's, and :func:`piv_verdict`."""
+    cases = [case for case in stats["cases"] if "piv" in case]
+    if not cases:
+        return []
+    first = cases[0]["piv"]
+    settings = first["piv"]
+    lines = [
+        "",
+        "## PIV beside PTV",
+        "",
+        f"PIV frames of {first['n_tracers']} tracers across a Gaussian light sheet "
+        f"(pixel = {first['pixel_size_over_L']:.3g} L), Δt = {first['dt']:.3g}, "
+        f"{settings['passes']} passes down to {settings['window']} px windows "
+        f"(overlap {settings['overlap']:g}); cases in `piv/<case>.h5`, figures "
+        f"`figures/piv_*`. Motion: {first['motion']}.",
+        "",
+        "Refraction error of a vector: measured through the field minus measured through a "
+        "uniform medium on the same tracers (pixels, rms over the vectors used); *optics*: "
+        "the window average of the rays' image-point shifts; *baseline*: the uniform-medium "
+        "vector minus the window-averaged truth (the PIV method's own error). Relative "
+        "errors with their bootstrap 95 % intervals (each vector one sample: overlapping "
+        "windows share tracers, so the intervals are too narrow); `stats.json`: `piv` and "
+        "`piv_vs_ptv` per case.",
+        "",
+    ]
+    header = [
+        "case",
+        "G",
+        "vectors used",
+        "truth rms (px)",
+        "refraction rms (px)",
+        "optics rms (px)",
+        "baseline rms (px)",
+        "PIV rms(ε)/rms(u3)",
+        "PIV rms(ε)/rms(|u|)",
+        "PTV rms(ε)/rms(|u|)",
+        "PIV/PTV",
+        "optics PIV/PTV",
+    ]
+    rows = []
+    for case in cases:
+        piv = case["piv"]
+        pixels = piv["displacement_px"]
+        compared = case.get("piv_vs_ptv", {}).get("magnitude", {})
+        rows.append(
+            [
+                case["name"],
+                number(piv["G"]),
+                f"{piv['n_used']}/{piv['n_vectors']}",
+                number(pixels["truth_rms"]),
+                number(pixels["refraction_rms"]),
+                number(pixels["optics_rms"]),
+                number(pixels["baseline_rms"]),
+                _percent_of(piv["velocity"]["u3"], "rms_normalized"),
+                _percent_of(piv["velocity"]["magnitude"], "rms_normalized"),
+                _percent_of(case["velocity"]["magnitude"], "rms_normalized")
+                if "velocity" in case
+                else "n/a",
+                number(compared.get("ratio_rms_normalized")),
+                number(compared.get("optics_ratio_rms_normalized")),
+            ]
+        )
+    return [*lines, *_table(header, rows), "", piv_verdict(stats), ""]
