@@ -37,12 +37,15 @@ def test_device_description_lists_what_users_need(device):
         "device",
         "opencl_version",
         "compute_units",
-        "global_memory_mib",
         "fp64",
         "images",
         "usable",
     ):
         assert key in info
+    # PoCL reports global memory as a share of the host's free memory: a record that held it
+    # would differ between two processes on the same device (a Dask worker and the client)
+    assert "global_memory_mib" not in info
+    assert all(entry["global_memory_mib"] > 0 for entry in rimcl.list_devices())
     assert info["usable"] is True
     assert sum(entry["default"] for entry in list_devices()) == 1
 

@@ -79,6 +79,10 @@ def is_pocl(device):
 def describe_device(device):
     """Plain-data description of a device, for tables and output files.
 
+    Only what identifies the device: PoCL reports its global memory as a share of the host's
+    memory free at the time, so the size would make two records of the same device differ
+    (:func:`list_devices` adds it for display).
+
     Returns
     -------
     dict
@@ -92,7 +96,6 @@ def describe_device(device):
         "opencl_version": device.version.strip(),
         "driver_version": device.driver_version.strip(),
         "compute_units": int(device.max_compute_units),
-        "global_memory_mib": int(device.global_mem_size // 2**20),
         "fp64": has_fp64(device),
         "images": bool(device.image_support),
         "usable": not build_problem(device),
@@ -115,7 +118,12 @@ def list_devices():
     except RimclError:
         default = None
     return [
-        {"index": f"{p}:{d}", "default": device == default, **describe_device(device)}
+        {
+            "index": f"{p}:{d}",
+            "default": device == default,
+            "global_memory_mib": int(device.global_mem_size // 2**20),
+            **describe_device(device),
+        }
         for p, d, device in found
     ]
 
