@@ -25,9 +25,9 @@ _EXPORTS = {
     "sample_path": "rimcl.fields.sample",
     "run_render": "rimcl.ptv.measure",
     "write_render": "rimcl.ptv.measure",
-    "load_render": "rimcl.stats.compute",
-    "compute_stats": "rimcl.stats.compute",
-    "run_stats": "rimcl.stats.compute",
+    "load_render": "rimcl.stats.render_file",
+    "compute_stats": "rimcl.stats.document",
+    "run_stats": "rimcl.stats.document",
     "load_scene": "rimcl.scene.load",
     "run_study": "rimcl.study.run",
 }

@@ -13,7 +13,7 @@ from synthetic_render import write_render_file
 
 from rimcl.cli.main import cli
 from rimcl.scene.load import default_scene, load_scene
-from rimcl.stats.compute import load_render
+from rimcl.stats.render_file import load_render
 
 QUICK = ["--tracers", "6", "--fan", "6", "--no-progress", "--no-figures"]
 

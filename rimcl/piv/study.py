@@ -11,7 +11,7 @@ Per vector of the final PIV grid (pixels; ``dx`` along ``x2``, ``dy`` along ``x3
 - **baseline**: the uniform-medium vector minus the window-averaged true displacement (the
   PIV method's own error: finite windows, gradients, lost pairs, sub-pixel fit).
 
-Statistics take the shapes of :mod:`rimcl.stats.compute` (``error_summary`` of the relative errors
+Statistics take the shapes of :mod:`rimcl.stats.summaries` (``error_summary`` of the relative errors
 of ``u2``, ``u3`` and ``|u|``, with velocities ``u = d · pixel_size / Δt``), over the vectors
 valid in both measurements whose window holds tracers. A vector replaced by the outlier
 test in either measurement is left out and counted.
@@ -34,7 +34,8 @@ from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path, stamp_h5, to_json
 from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair
 from rimcl.piv.images import PivConfig, PivImaging, run_piv_render, window_means
-from rimcl.stats.compute import angle_deg, error_summary
+from rimcl.stats.summaries import error_summary
+from rimcl.stats.tables import angle_deg
 
 SCHEMA = "piv_case"
 SCHEMA_VERSION = 1
@@ -185,7 +186,7 @@ def per_vector(render, field_vectors, uniform_vectors):
 
 
 def velocity_table(vectors, pixel_size, dt):
-    """Velocities of the used vectors in the column layout of :mod:`rimcl.stats.compute`.
+    """Velocities of the used vectors in the column layout of :mod:`rimcl.stats.render_file`.
 
     Returns
     -------
@@ -231,8 +232,8 @@ def window_blocks(shape, overlap):
 def vector_errors(table, measured, reference, ids=None):
     """Relative-error summaries of the velocity: ``u2``, ``u3``, magnitude and angle.
 
-    The PIV counterpart of the PTV velocity block of :mod:`rimcl.stats.compute` (same keys and
-    :func:`rimcl.stats.compute.error_summary` shapes); each vector is one sample.
+    The PIV counterpart of the PTV velocity block of :mod:`rimcl.stats.error_blocks` (same keys and
+    :func:`rimcl.stats.summaries.error_summary` shapes); each vector is one sample.
 
     Parameters
     ----------
@@ -272,7 +273,7 @@ def _max_abs(values):
 
 
 def case_statistics(render, vectors, settings):
-    """Statistics of one case, in the shapes of :func:`rimcl.stats.compute.case_statistics`.
+    """Statistics of one case, in the shapes of :func:`rimcl.stats.document.case_statistics`.
 
     Returns
     -------
@@ -469,7 +470,7 @@ def agreement_with_ptv(piv_stats, ptv_stats):
     piv_stats : dict
         :func:`case_statistics` of one case.
     ptv_stats : dict
-        The ``stats.json`` entry of the same case (:func:`rimcl.stats.compute.case_statistics`).
+        The ``stats.json`` entry of the same case (:func:`rimcl.stats.document.case_statistics`).
 
     Returns
     -------
