@@ -263,7 +263,7 @@ def render(
       rimcl piv render --case C4 --camera pupil --pupil-rays 32 -o water
       rimcl piv analyze water_field_A.tif water_field_B.tif -o water_vectors.h5
     """
-    from rimcl.fields.fieldfile import case_arguments
+    from rimcl.fields.field_loading import case_arguments
     from rimcl.piv.analysis import PivSettings
     from rimcl.piv.images import (
         PivConfig,

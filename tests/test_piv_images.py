@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
 from rimcl.fields.field import Field
-from rimcl.fields.fieldfile import write_field
+from rimcl.fields.field_writer import write_field
 from rimcl.optics.camera import PupilCamera, Scene
 from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair
 from rimcl.piv.images import (

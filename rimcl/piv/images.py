@@ -590,7 +590,7 @@ class FlowVelocity:
 
     Parameters
     ----------
-    source : rimcl.fields.fieldfile.FieldFile
+    source : rimcl.fields.field_reader.FieldFile
     frames : sequence of int
         Consecutive stored frames covering the times asked for.
     """
