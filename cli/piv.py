@@ -265,13 +265,9 @@ def render(
     """
     from rimcl.fields.field_loading import case_arguments
     from rimcl.piv.analysis import PivSettings
-    from rimcl.piv.images import (
-        PivConfig,
-        PivImaging,
-        check_outputs,
-        run_piv_render,
-        write_piv_render,
-    )
+    from rimcl.piv.imaging_config import PivImaging
+    from rimcl.piv.render import PivConfig, run_piv_render
+    from rimcl.piv.truth import check_outputs, write_piv_render
     from rimcl.scene.config import CameraConfig, IntegratorConfig, RunConfig
 
     check_outputs(prefix, overwrite)
