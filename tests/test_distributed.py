@@ -19,7 +19,7 @@ from click.testing import CliRunner
 
 from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
-from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.field_reader import FieldFile
 from rimcl.fields.sample import sample_path
 from rimcl.ptv.measure import run_render
 from rimcl.scene.config import MeasureConfig

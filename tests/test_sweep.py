@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rimcl.fields.fieldfile import write_field
+from rimcl.fields.field_writer import write_field
 from rimcl.ptv.measure import run_render, write_render
 from rimcl.ptv.sweep import every_mth_frame
 from rimcl.scene.config import MeasureConfig, TimeConfig

@@ -33,7 +33,9 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path, stamp_h5, to_json
 from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair
-from rimcl.piv.images import PivConfig, PivImaging, run_piv_render, window_means
+from rimcl.piv.imaging_config import PivImaging
+from rimcl.piv.render import PivConfig, run_piv_render
+from rimcl.piv.truth import window_means
 from rimcl.stats.summaries import error_summary
 from rimcl.stats.tables import angle_deg
 
@@ -71,7 +73,7 @@ class PivCaseReference:
 
     Attributes
     ----------
-    render : rimcl.piv.images.PivReference
+    render : rimcl.piv.render.PivReference
     settings : rimcl.piv.analysis.PivSettings
     uniform_vectors : rimcl.piv.analysis.PivResult
     """
@@ -87,7 +89,7 @@ class PivCase:
 
     Attributes
     ----------
-    render : rimcl.piv.images.PivRender
+    render : rimcl.piv.render.PivRender
     field_vectors, uniform_vectors : rimcl.piv.analysis.PivResult
     vectors : dict of str to ndarray
         :data:`VECTOR_COLUMNS`, each (rows, columns); displacements in pixels.
@@ -117,7 +119,7 @@ def optics_error(render, grid):
 
     Parameters
     ----------
-    render : rimcl.piv.images.PivRender
+    render : rimcl.piv.render.PivRender
     grid : rimcl.piv.analysis.WindowGrid
 
     Returns
@@ -138,7 +140,7 @@ def per_vector(render, field_vectors, uniform_vectors):
 
     Parameters
     ----------
-    render : rimcl.piv.images.PivRender
+    render : rimcl.piv.render.PivRender
     field_vectors, uniform_vectors : rimcl.piv.analysis.PivResult
         On the grid of the truth (same window and overlap).
 
@@ -279,7 +281,7 @@ def case_statistics(render, vectors, settings):
     -------
     dict
         ``name, G, delta_n_max, length_L, pixel_size_over_L, dt, motion`` (the motion
-        model, :data:`rimcl.piv.images.MOTION_SHEET` or ``MOTION_3D``), ``n_tracers,
+        model, :data:`rimcl.piv.tracer_motion.MOTION_SHEET` or ``MOTION_3D``), ``n_tracers,
         n_vectors, n_used, n_excluded`` (by reason), ``velocity`` (refraction error ``u' - u^ref``:
         ``u2, u3, magnitude`` error summaries and ``angle_deg_median``), ``optics`` (the
         optics part, same shape), ``baseline`` (``{"velocity": ...}``, ``u^ref - u``),
@@ -363,10 +365,10 @@ def run_piv_case(
     case, k_rho :
         The case (``"C0"`` … ``"C4"``, ``"G=…"``, ``"dT=…"``, or ``k_rho``; 0 is a
         uniform medium).
-    piv : rimcl.piv.images.PivConfig, optional
+    piv : rimcl.piv.render.PivConfig, optional
         Imaging, timing and correlation (``piv.settings``).
     camera, integrator, fluid, run : optional
-        The :mod:`rimcl.scene.config` objects of :func:`rimcl.piv.images.run_piv_render`.
+        The :mod:`rimcl.scene.config` objects of :func:`rimcl.piv.render.run_piv_render`.
     reference : PivCaseReference, optional
         ``PivCase.reference`` of an earlier case of the same configuration.
 
@@ -515,7 +517,7 @@ def configs_from_scene(scene):
 
     Returns
     -------
-    piv : rimcl.piv.images.PivConfig
+    piv : rimcl.piv.render.PivConfig
     configs : dict
         ``camera``, ``integrator``, ``fluid``, ``run`` for :func:`run_piv_case`.
     """

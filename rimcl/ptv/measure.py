@@ -143,7 +143,7 @@ def open_source(field, stack):
 
         field = sample_path()
     if isinstance(field, (str, Path)):
-        from rimcl.fields.fieldfile import FieldFile
+        from rimcl.fields.field_reader import FieldFile
 
         return stack.enter_context(FieldFile(field)), str(Path(field).resolve())
     path = getattr(field, "path", None)

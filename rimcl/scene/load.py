@@ -626,7 +626,7 @@ def _keys():
 
 
 def _piv_keys():
-    """The ``[piv]`` section (:mod:`rimcl.piv.images`, :mod:`rimcl.piv.analysis`).
+    """The ``[piv]`` section (:mod:`rimcl.piv.render`, :mod:`rimcl.piv.analysis`).
 
     Frames, light sheet and correlation.
     """

@@ -285,7 +285,7 @@ class _CachedFrames:
         return getattr(self._source, name)
 
     def field(self, frame=0, k_rho=None):
-        """:meth:`rimcl.fields.fieldfile.FieldFile.field`, kept for the next call."""
+        """:meth:`rimcl.fields.field_reader.FieldFile.field`, kept for the next call."""
         key = (int(frame), k_rho)
         if key not in self._frames:
             if any(k_rho != cached for _, cached in self._frames):
@@ -323,7 +323,7 @@ class RimclPlugin(WorkerPlugin):
     def setup(self, worker):
         """Choose the device, create its context, open the field file."""
         from rimcl.core.device import context_for
-        from rimcl.fields.fieldfile import FieldFile
+        from rimcl.fields.field_reader import FieldFile
         from rimcl.fields.sample import sample_path
 
         self.device = worker_device(worker.name, self.device_spec)

@@ -189,7 +189,7 @@ def study_cases(scene):
     -------
     list of (str, str or None)
     """
-    from rimcl.fields.fieldfile import field_kind
+    from rimcl.fields.field_reader import field_kind
     from rimcl.fields.sample import sample_path
 
     if field_kind(scene["field"]["path"] or sample_path()) == "delta_n":
@@ -219,7 +219,7 @@ def _check_resources(scene):
     or whose sizes do not fit in memory."""
     from rimcl.core.device import select_device
     from rimcl.core.memory import check_render_request
-    from rimcl.fields.fieldfile import FieldFile
+    from rimcl.fields.field_reader import FieldFile
     from rimcl.fields.sample import sample_path
     from rimcl.optics.camera import Scene
 
