@@ -24,7 +24,7 @@ _EXPORTS = {
     "FieldFile": "rimcl.fields.fieldfile",
     "sample_path": "rimcl.fields.sample",
     "run_render": "rimcl.ptv.measure",
-    "write_render": "rimcl.ptv.measure",
+    "write_render": "rimcl.ptv.render_file",
     "load_render": "rimcl.stats.compute",
     "compute_stats": "rimcl.stats.compute",
     "run_stats": "rimcl.stats.compute",

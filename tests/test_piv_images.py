@@ -27,7 +27,7 @@ from rimcl.piv.images import (
     window_means,
 )
 from rimcl.piv.study import load_piv_case, run_piv_case, write_piv_case
-from rimcl.ptv.measure import uniform_like
+from rimcl.ptv.field_source import uniform_like
 from rimcl.scene.config import CameraConfig, RunConfig
 
 #: 96 px frames, 8 rays per tracer through a pupil, 16 px windows: a case in ~1 s

@@ -641,7 +641,7 @@ class FlowVelocity:
 
 
 #: RK4 steps between the two exposures at least, and at least this many per stored frame
-#: interval (the rule of the PTV tracks, :mod:`rimcl.ptv.measure`).
+#: interval (the rule of the PTV tracks, :mod:`rimcl.ptv.imaging_passes`).
 TRACKING_SUBSTEPS = 8
 #: Default time between exposures (time units): on the shipped sample (velocity rms 0.14
 #: on the sheet, frames 0.02 apart) 0.1 moves tracers 1.5 px rms and up to 4.5 px at 512 px,
@@ -932,7 +932,7 @@ def run_piv_render(
     PivRender
     """
     from rimcl.core.device import describe_device, select_device
-    from rimcl.ptv.measure import case_of, open_source, reference_step, uniform_like
+    from rimcl.ptv.field_source import case_of, open_source, reference_step, uniform_like
 
     piv = PivConfig() if piv is None else piv
     camera_config = PIV_CAMERA if camera is None else camera
