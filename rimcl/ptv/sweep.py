@@ -12,7 +12,7 @@ import dataclasses
 
 import numpy as np
 
-from rimcl.ptv.measure import kinematics_tables
+from rimcl.ptv.kinematics import kinematics_tables
 from rimcl.scene.config import TimeConfig
 
 #: Position kinds of a render file's ``tracers`` table (columns ``x2_<kind>``, ``x3_<kind>``).

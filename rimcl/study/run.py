@@ -313,7 +313,8 @@ def run_study(
         study already running there, an unusable field or device, a scene that cannot fit
         in memory, and every error of the measurement.
     """
-    from rimcl.ptv.measure import run_render, write_render
+    from rimcl.ptv.measure import run_render
+    from rimcl.ptv.render_file import write_render
 
     started = time.perf_counter()
     say = report or (lambda line: None)
