@@ -109,9 +109,9 @@ def prepare(scene, out_dir, timings):
     return Run(source, times, float(length_m), volume, true, u_true, a_true)
 
 
-def _cameras(scene, volume, length_m, fluid_index):
-    """The rig's cameras for a calibration fluid of ``fluid_index``."""
-    rig = scene.rig
+def rig_cameras(rig, volume, length_m, fluid_index):
+    """The cameras of a :class:`~rimcl.lpt.config.RigConfig` (its tables, or its preset
+    placed for ``volume``) for a calibration fluid of ``fluid_index``."""
     specs = rig.cameras
     if not specs:
         centre = 0.5 * (volume.seed_lo + volume.seed_hi)
@@ -206,7 +206,7 @@ def run_case(run, scene, case, device=None, progress=None):
     started = time.perf_counter()
     field0 = index.field(run.source, None, run.times[0])
     timings["field"] = time.perf_counter() - started
-    cameras = _cameras(scene, run.volume, run.length_m, field0.n_ref)
+    cameras = rig_cameras(scene.rig, run.volume, run.length_m, field0.n_ref)
     started = time.perf_counter()
     target, fitted = calibrate_rig(cameras, run.volume, settings)
     models = [f[settings.model] for f in fitted]
@@ -396,7 +396,7 @@ def case_statistics(run, result, scene):
     return stats
 
 
-def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False):
+def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset=False):
     """Run every case of an LPT scene; write case files and ``lpt_stats.json``.
 
     Parameters
@@ -409,6 +409,8 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False):
         ``progress(case, frame, frames)`` after each frame.
     overwrite : bool
         Replace existing outputs.
+    dataset : bool
+        Also write the files for LPT codes (:func:`rimcl.lpt.files.write_dataset`).
 
     Returns
     -------
@@ -416,7 +418,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False):
         The statistics document written to ``lpt_stats.json``.
     """
     from rimcl.core.provenance import versions
-    from rimcl.lpt.files import write_case, write_json
+    from rimcl.lpt.files import write_case, write_dataset, write_json
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -459,9 +461,49 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False):
             stats["timings_s"] = result["timings"]
             started = time.perf_counter()
             write_case(out_dir / f"lpt_case_{result['case']}.h5", run, result, scene, overwrite)
+            if dataset:
+                write_dataset(out_dir, run, result, scene, overwrite)
             stats["timings_s"]["write"] = time.perf_counter() - started
             document["cases"][result["case"]] = stats
     finally:
         run.source.close()
     write_json(stats_path, document)
     return document
+
+
+def _cell(value, scale=1.0, digits=3):
+    return "n/a" if value is None else f"{value * scale:.{digits}g}"
+
+
+def summary_lines(document):
+    """Short text lines of a run's results (one block per case), for a terminal."""
+    lines = [
+        f"{document['tracers']} tracers, {len(document['times'])} frames, "
+        f"length {document['length_m'] * 1e3:.4g} mm per field unit"
+    ]
+    for name, case in document["cases"].items():
+        rays = ", ".join(str(r["rays"]) for r in case["rays"])
+        residual = max(r["soloff"] for r in case["calibration_residual_px"].values())
+        lines.append(
+            f"{name}: n_ref {case['n_ref']:.6f}; rays per tracer {rays}; Soloff calibration "
+            f"residual up to {residual:.3g} px; {case['tracers_kept']}/{case['tracers']} tracers"
+        )
+        pos = case["position"]
+        lines.append(
+            "  position refraction rms (px): "
+            + ", ".join(f"{k} {_cell(pos[k]['refraction_rms_px'])}" for k in COMPONENTS)
+        )
+        for label in ("velocity", "acceleration"):
+            block = case[label]
+            lines.append(
+                f"  {label} rms(ε)/rms(truth): "
+                + ", ".join(
+                    f"{k} {_cell(block[k]['refraction']['rms_normalized'])} "
+                    f"(baseline {_cell(block[k]['baseline']['rms_normalized'])})"
+                    for k in COMPONENTS
+                )
+            )
+        meas = case["disparity"]["meas"]
+        lost = ", ".join(f">{k} {_cell(v, 100, 3)} %" for k, v in meas["lost_fraction"].items())
+        lines.append(f"  disparity median {_cell(meas['median_px'])} px; matches lost {lost}")
+    return lines
