@@ -60,7 +60,9 @@ class RigCamera:
     x_end : float
         The exit face (window's inner face).
     window : FlatWindow
-        Thickness 0 for a bare fluid surface.
+        Its glass and outside indices (its thickness is ``window_thickness_mm``).
+    window_thickness_mm : float
+        0 for a bare fluid surface.
     fluid_index : float
         Index of the uniform (calibration) fluid.
     wavelength_nm, particle_diameter_um : float
@@ -82,6 +84,7 @@ class RigCamera:
     length_m: float
     x_end: float
     window: FlatWindow
+    window_thickness_mm: float
     fluid_index: float
     wavelength_nm: float
     particle_diameter_um: float
@@ -108,6 +111,7 @@ class RigCamera:
         scheimpflug_deg=0.0,
         wavelength_nm=532.0,
         particle_diameter_um=10.0,
+        window_thickness_mm=None,
     ):
         """A camera at ``position`` (field units) aimed through the window at ``look_at``."""
         position = np.asarray(position, dtype=np.float64).reshape(3)
@@ -132,7 +136,11 @@ class RigCamera:
         pixels = tuple(int(p) for p in pixels)
         if len(pixels) != 2 or min(pixels) < 1:
             raise RimclError(f"camera {name}: sensor_pixels must be two counts >= 1")
-        thickness = 1e-3 * window.thickness_mm / length_m
+        if window_thickness_mm is None:
+            window_thickness_mm = window.thickness_mm
+        if not (np.isfinite(window_thickness_mm) and window_thickness_mm >= 0):
+            raise RimclError(f"camera {name}: the window thickness must be >= 0 mm")
+        thickness = 1e-3 * window_thickness_mm / length_m
         if not position[0] > x_end + thickness:
             raise RimclError(
                 f"camera {name} at x1 = {position[0]:g} must sit beyond the window, at "
@@ -176,6 +184,7 @@ class RigCamera:
             length_m=float(length_m),
             x_end=float(x_end),
             window=window,
+            window_thickness_mm=float(window_thickness_mm),
             fluid_index=float(fluid_index),
             wavelength_nm=float(wavelength_nm),
             particle_diameter_um=float(particle_diameter_um),
@@ -193,7 +202,7 @@ class RigCamera:
     @property
     def thickness(self):
         """Window thickness (field length units)."""
-        return 1e-3 * self.window.thickness_mm / self.length_m
+        return 1e-3 * self.window_thickness_mm / self.length_m
 
     @property
     def magnification(self):
@@ -312,12 +321,27 @@ class RigCamera:
     def aim(self, points, pupil_points):
         """Start directions in the uniform fluid from each point to each pupil point.
 
+        Parameters
+        ----------
+        points : ndarray, shape (K, 3)
+        pupil_points : ndarray, shape (P, 3), or (K, P, 3) per point
+
         Returns
         -------
         ndarray, float64, shape (K, P, 3)
         """
         points = np.asarray(points, dtype=np.float64).reshape(-1, 1, 3)
-        return self.layers.aim(points, np.asarray(pupil_points)[None])
+        targets = np.asarray(pupil_points, dtype=np.float64)
+        return self.layers.aim(points, targets if targets.ndim == 3 else targets[None])
+
+    def pupil_miss(self, end_pos, end_dir, exit_index=None):
+        """Where exit rays, carried through the window, cross the pupil plane, relative to
+        the pupil centre (the plane through it normal to the axis). Shape (K, 3)."""
+        n_fluid = self.fluid_index if exit_index is None else exit_index
+        with np.errstate(invalid="ignore", divide="ignore"):
+            outer, outside = cross_window(end_pos, end_dir, self.thickness, n_fluid, self.window)
+            run = ((self.position - outer) @ self.forward) / (outside @ self.forward)
+            return outer + run[:, None] * outside - self.position
 
     def image_of_rays(self, end_pos, end_dir, exit_index=None):
         """Pixel positions at which the lens images exit rays.
@@ -371,7 +395,7 @@ class RigCamera:
             "image_diameter_um": self.image_diameter_um,
             "psf_sigma_px": self.psf_sigma_px,
             "pixel_size": self.pixel_size,
-            "window": self.window.describe(),
+            "window": {**self.window.describe(), "thickness_mm": self.window_thickness_mm},
             "fluid_index": self.fluid_index,
             "wavelength_nm": self.wavelength_nm,
         }

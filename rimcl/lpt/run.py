@@ -124,7 +124,8 @@ def rig_cameras(rig, volume, length_m, fluid_index):
             fluid_index=fluid_index,
             rig=rig,
         )
-    window = FlatWindow(max(rig.window_thickness_mm, 0.0), rig.window_index, rig.outside_index)
+    # FlatWindow wants a positive thickness; a bare surface (0 mm) passes its own
+    window = FlatWindow(rig.window_thickness_mm or 1.0, rig.window_index, rig.outside_index)
     to_field = 1e-3 / length_m
     return [
         RigCamera.build(
@@ -139,6 +140,7 @@ def rig_cameras(rig, volume, length_m, fluid_index):
             length_m=length_m,
             x_end=volume.x_end,
             window=window,
+            window_thickness_mm=rig.window_thickness_mm,
             fluid_index=fluid_index,
             wavelength_nm=rig.wavelength_nm,
             particle_diameter_um=rig.particle_diameter_um,

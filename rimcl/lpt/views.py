@@ -1,10 +1,14 @@
 """Each tracer seen by each camera: rays aimed at the camera's pupil, traced, imaged.
 
-A camera with a narrow pupil sees a tracer through one thin bundle of rays. The rays are
-aimed (through the uniform calibration fluid and the window) at points of the entrance
-pupil: its centre for one ray (the chief ray), else a Vogel spiral; they are traced through
-the field to the exit face ``x1 = x_end``, carried through the window (with the fluid's
-index at the exit point), and imaged by the lens (:meth:`RigCamera.image_of_rays`). The
+A camera with a narrow pupil sees a tracer through one thin bundle of rays. The chief ray
+is the ray that *reaches* the pupil centre: aimed first through the uniform calibration
+fluid and the window, then re-aimed at the pupil centre minus its miss until it hits the
+centre (:func:`chief_targets`; through the field the aimed ray misses it, and a ray off
+the centre images where it crosses the focus plane, not where the camera's line of sight
+for it lies). The bundle is the chief ray's aim point plus the pupil's offsets: its centre
+for one ray, else a mirrored Vogel spiral; the rays are traced through the field to the
+exit face ``x1 = x_end``, carried through the window (with the fluid's index at the exit
+point), and imaged by the lens (:meth:`RigCamera.image_of_rays`). The
 tracer's image centroid is the mean of its rays' image points (the optics part of the
 error budget: no pixels, equal weights). Through a uniform field the rays are straight
 lines (:func:`rimcl.optics.trace.straight_rays`), exactly.
@@ -109,6 +113,48 @@ class View:
     trace: object
 
 
+#: Re-aims of the chief ray at most, and the miss (field length units) that ends them.
+CHIEF_ITERATIONS = 6
+CHIEF_TOLERANCE = 1e-10
+
+
+def _exit_index(field, result, camera, interp):
+    """Fluid index at each ok ray's exit point (the window's inner face)."""
+    if getattr(field, "is_uniform", False):
+        return field.n_ref
+    index = np.full(len(result.ok), camera.fluid_index)
+    index[result.ok] = sample_field(field, result.end_pos[result.ok], interp)[0]
+    return index
+
+
+def chief_targets(field, camera, points, tracer):
+    """Aim points that make each tracer's chief ray reach the pupil centre.
+
+    Returns
+    -------
+    targets : ndarray, shape (N, 3)
+        Where to aim (through the uniform fluid) so that the traced ray hits the centre.
+    miss : ndarray, shape (N,)
+        The last ray's distance from the centre on the pupil plane (field length units);
+        NaN for rays that failed.
+    """
+    targets = np.broadcast_to(camera.position, points.shape).copy()
+    if getattr(field, "is_uniform", False):
+        return targets, np.zeros(len(points))
+    for _ in range(CHIEF_ITERATIONS):
+        directions = camera.aim(points, targets[:, None]).reshape(-1, 3)
+        result = tracer(field, points, directions, camera.x_end)
+        offset = camera.pupil_miss(
+            result.end_pos, result.end_dir, _exit_index(field, result, camera, tracer.interp)
+        )
+        offset[~result.ok] = np.nan
+        miss = np.linalg.norm(offset, axis=1)
+        if not np.any(miss > CHIEF_TOLERANCE):
+            break
+        targets -= np.nan_to_num(offset)
+    return targets, miss
+
+
 def view(field, camera, points, rays, tracer):
     """Trace ``rays`` rays from every point to ``camera`` and image them.
 
@@ -127,16 +173,13 @@ def view(field, camera, points, rays, tracer):
     View
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    pupil = camera.pupil_points(rays)
-    directions = camera.aim(points, pupil).reshape(-1, 3)
+    chief, _ = chief_targets(field, camera, points, tracer)
+    pupil = camera.pupil_points(rays) - camera.position
+    directions = camera.aim(points, chief[:, None] + pupil[None]).reshape(-1, 3)
     origins = np.repeat(points, len(pupil), axis=0)
     result = tracer(field, origins, directions, camera.x_end)
     ok = result.ok
-    if getattr(field, "is_uniform", False):
-        exit_index = field.n_ref
-    else:
-        exit_index = np.full(len(ok), camera.fluid_index)
-        exit_index[ok] = sample_field(field, result.end_pos[ok], tracer.interp)[0]
+    exit_index = _exit_index(field, result, camera, tracer.interp)
     images = camera.image_of_rays(result.end_pos, result.end_dir, exit_index)
     images[~ok] = np.nan
     images = images.reshape(len(points), len(pupil), 2)
