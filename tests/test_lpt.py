@@ -192,7 +192,7 @@ def test_soloff_beats_pinhole_through_the_window():
 def test_scene_keys_are_checked():
     with pytest.raises(RimclError, match="did you mean 'thickness'"):
         parse_lpt_scene({"illumination": {"thicknes": 1.0}})
-    with pytest.raises(RimclError, match="rig.preset must be one of"):
+    with pytest.raises(RimclError, match=r"rig\.preset must be one of"):
         parse_lpt_scene({"rig": {"preset": "lpt-chalenge"}})
     with pytest.raises(RimclError, match="does not apply to LPT"):
         parse_lpt_scene({"camera": {"kind": "lens"}})
