@@ -256,7 +256,7 @@ def parse_lpt_scene(raw, where="the scene"):
     -------
     LptScene
     """
-    from rimcl.scene.load import validate_scene
+    from rimcl.scene.validate import validate_scene
 
     raw = dict(raw)
     rig = _table(raw.pop("rig", {}), _RIG_KEYS, "rig", where)

@@ -7,7 +7,7 @@ therefore makes the built-in flow with the full velocity: the same Boussinesq so
 frames ``time.dt`` apart), written once into the output directory and reused.
 
 True tracks: ``dx/dt = u(x, t)`` by RK4 (:func:`rimcl.ptv.track.integrate_tracks`) with
-``u`` the PIV stage's 3-D interpolant (:class:`rimcl.piv.images.FlowVelocity`: cubic
+``u`` the PIV stage's 3-D interpolant (:class:`rimcl.piv.tracer_motion.FlowVelocity`: cubic
 B-spline in space, linear in time between stored frames, :func:`volume_velocity`); true
 velocity ``u(x_k, t_k)`` and acceleration ``Du/Dt``
 (:func:`rimcl.ptv.track.track_acceleration`).
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from rimcl.core.errors import RimclError
-from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.field_reader import FieldFile
 
 #: The built-in flow: grid, seed of the solver.
 BUILTIN_GRID = 32
@@ -123,8 +123,8 @@ class Volume:
 
 def volume_velocity(source, t_first, t_last):
     """The full velocity of ``source`` over ``[t_first, t_last]`` (the stored frames
-    covering it), as a :class:`rimcl.piv.images.FlowVelocity`."""
-    from rimcl.piv.images import FlowVelocity
+    covering it), as a :class:`rimcl.piv.tracer_motion.FlowVelocity`."""
+    from rimcl.piv.tracer_motion import FlowVelocity
 
     if not source.has_full_velocity:
         raise RimclError(

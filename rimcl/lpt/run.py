@@ -28,7 +28,8 @@ from rimcl.lpt.flow import BUILTIN_DT, Volume, builtin_flow, volume_velocity
 from rimcl.lpt.rig import RigCamera
 from rimcl.lpt.views import Tracer, choose_ray_count, uniform_field, view
 from rimcl.optics.camera import FlatWindow
-from rimcl.stats.compute import TracerBootstrap, error_summary
+from rimcl.stats.bootstrap import TracerBootstrap
+from rimcl.stats.summaries import error_summary
 
 COMPONENTS = ("x1", "x2", "x3")
 #: Tracers sampled to choose the ray count.
@@ -64,7 +65,7 @@ class Run:
 
 def prepare(scene, out_dir, timings):
     """Open the field (or make the built-in flow), seed tracers, integrate true tracks."""
-    from rimcl.fields.fieldfile import FieldFile
+    from rimcl.fields.field_reader import FieldFile
     from rimcl.ptv.track import integrate_tracks, track_acceleration, track_velocity
 
     study = scene.study
@@ -198,7 +199,7 @@ def run_case(run, scene, case, device=None, progress=None):
         ``disparity_meas``/``ref`` (F, N, C), ``failed_rays`` (F, C, N), ``flags`` (N,)),
         the cameras, calibration, ray choices and stage ``timings`` (s).
     """
-    from rimcl.ptv.measure import case_of
+    from rimcl.ptv.field_source import case_of
     from rimcl.scene.config import FluidConfig
 
     timings = {}
