@@ -47,3 +47,16 @@ def test_a_study_travels_to_dask_workers_and_back_from_scene_toml(scene, tmp_pat
     path = tmp_path / "scene.toml"
     path.write_text(study.text)
     assert StudyConfig.from_scene(load_scene(path)) == study
+
+
+def test_run_study_takes_a_scene_file_or_a_study_alike(device, tmp_path):
+    from rimcl.study.run import run_study
+
+    tiny = {"cases.names": ["C0", "C4"], "tracers.count": 4, "camera.fan": 4}
+    path = tmp_path / "tiny.toml"
+    path.write_text(scene_text(load_scene(None, {**tiny, "run.device": device.name})))
+    first = run_study(path, tmp_path / "out", figures=False)
+    assert first.ran == ["C0", "C4"]
+    assert (tmp_path / "out" / "scene.toml").read_text() == path.read_text()
+    again = run_study(StudyConfig.from_scene(load_scene(path)), tmp_path / "out", figures=False)
+    assert again.ran == [] and again.skipped == ["C0", "C4"] and not again.stats_redone
