@@ -7,7 +7,6 @@ import sys
 
 import click
 import pytest
-
 from doc_pages import (
     DOCS,
     PAGES,
@@ -18,11 +17,12 @@ from doc_pages import (
     prepared_shell,
     run_page,
 )
+
 from rimcl.cli.main import COMMANDS, cli
 from rimcl.scene.load import SCENE_KEYS, SECTIONS
 
 sys.path.insert(0, str(DOCS / "_ext"))
-import rimcl_docs  # noqa: E402
+import rimcl_docs
 
 # what `rimcl` accepts before its command
 ROOT_OPTIONS = {"-v", "--verbose", "--version", "-h", "--help"}
@@ -155,3 +155,26 @@ def test_append_directives_apply_to_their_command_only():
         "rimcl study data_samples/scenes/water_tank.toml --out tank --tracers 30"
         " --tracers 8 --no-figures"
     )
+
+
+def test_the_api_pages_cite_nothing_outside_the_repository():
+    """Every docstring, as the API pages show it, is free of citations of the design notes."""
+    import inspect
+    import pkgutil
+
+    import rimcl
+
+    left = []
+    for info in pkgutil.walk_packages(rimcl.__path__, "rimcl."):
+        if info.name.endswith("__main__"):  # runs the command line
+            continue
+        module = importlib.import_module(info.name)
+        objects = [module, *vars(module).values()]
+        objects += [m for o in objects if inspect.isclass(o) for m in vars(o).values()]
+        for obj in objects:
+            if getattr(obj, "__module__", module.__name__) != module.__name__:
+                continue
+            lines = (inspect.getdoc(obj) or "").splitlines() if obj is not None else []
+            rimcl_docs.drop_design_citations(None, None, None, obj, None, lines)
+            left += [f"{info.name}: {line}" for line in lines if "DESIGN" in line]
+    assert left == []

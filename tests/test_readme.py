@@ -4,7 +4,6 @@ that CI runs, a quick start that runs, and links into the documentation."""
 import re
 
 import pytest
-
 from doc_pages import README, ROOT, code_blocks, run_page
 
 
@@ -31,7 +30,9 @@ def test_the_readme_test_command_is_the_one_ci_runs():
 
 def test_the_docs_build_command_is_the_one_ci_runs():
     build = next(line for line in _ci_lines() if "sphinx-build" in line)
-    assert build == 'pip install -e ".[docs]" && sphinx-build -W --keep-going -b html docs docs/_build/html'
+    assert build == (
+        'pip install -e ".[docs]" && sphinx-build -W --keep-going -b html docs docs/_build/html'
+    )
     for page in (README, ROOT / "docs/install.md", ROOT / "docs/README.md"):
         assert build in page.read_text(encoding="utf-8"), page
 

@@ -77,7 +77,9 @@ def public_api_markdown():
         summary = ""
         doc = getattr(obj, "__doc__", None) if callable(obj) else None
         if doc:
-            summary = doc.strip().splitlines()[0]
+            # the first line of a reST docstring, in MyST: roles and literals converted
+            summary = re.sub(r":(\w+):`", r"{py:\1}`", doc.strip().splitlines()[0])
+            summary = re.sub(r"``(.+?)``", r"`\1`", summary)
         link = f"{{py:obj}}`rimcl.{name} <{target}>`" if target else f"`rimcl.{name}`"
         rows.append(f"| {link} | {_cell(summary)} |")
     return "\n".join(["| name | what |", "|---|---|", *rows, ""])
@@ -101,23 +103,51 @@ def write_generated(app=None):
 
 # ``literal`` spans, which reST leaves alone, and everything between them
 _LITERAL = re.compile(r"(``.+?``)")
+# a word ending in "_" before a bar or punctuation: reST would read ``ε_`` as a link
+_TRAILING_UNDERSCORE = re.compile(r"(?<=\w)_(?=\||[\s,.;:)]|$)")
+
+
+# Docstrings cite the project's design notes by section ("DESIGN §6.2"); the notes are not
+# part of the repository, so the pages leave the citations out.
+_CITE = r"DESIGN §[\d.–-]+(?:, §[\d.–-]+)*"
+_CITATIONS = (
+    (re.compile(rf"\s*\({_CITE}\)"), ""),  # "(DESIGN §6)"
+    (re.compile(rf"\({_CITE}[:;,]\s*"), "("),  # "(DESIGN §13: the ..." -> "(the ..."
+    (re.compile(rf"[,;]\s*{_CITE}(?=[);])"), ""),  # "plane, DESIGN §6.2)" -> "plane)"
+    (re.compile(rf",\s*{_CITE};"), ";"),  # "Gaussian, DESIGN §15; the" -> "Gaussian; the"
+    (re.compile(rf"\s*{_CITE}"), ""),
+)
+
+
+def drop_design_citations(app, what, name, obj, options, lines):
+    """Remove citations of the design notes, which are not in the repository."""
+    for i, line in enumerate(lines):
+        if "DESIGN" in line:
+            for pattern, replacement in _CITATIONS:
+                line = pattern.sub(replacement, line)
+            lines[i] = line
+
+
+def _plain(text):
+    return _TRAILING_UNDERSCORE.sub(r"\\_", text).replace("|", "\\|")
 
 
 def escape_bars(app, what, name, obj, options, lines):
-    """Escape ``|`` in docstrings outside literals.
+    """Escape ``|`` (and a word's trailing ``_`` before it) in docstrings outside literals.
 
-    Docstrings write magnitudes as ``|x|`` in plain text (they are read in ``help()`` too);
-    reST would take ``|x|`` for a substitution and fail. No docstring uses reST tables or
-    line blocks, the only other meanings of a bar.
+    Docstrings write magnitudes as ``|x|`` and ``ε_|u|`` in plain text (they are read in
+    ``help()`` too); reST would take ``|x|`` for a substitution and ``ε_`` for a link, and
+    fail. No docstring uses reST tables, line blocks or ``name_`` links, the other meanings.
     """
     for i, line in enumerate(lines):
         if "|" in line:
             parts = _LITERAL.split(line)
-            parts[::2] = [part.replace("|", "\\|") for part in parts[::2]]
+            parts[::2] = [_plain(part) for part in parts[::2]]
             lines[i] = "".join(parts)
 
 
 def setup(app):
     app.connect("builder-inited", write_generated)
+    app.connect("autodoc-process-docstring", drop_design_citations, priority=390)
     app.connect("autodoc-process-docstring", escape_bars, priority=400)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

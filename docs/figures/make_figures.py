@@ -48,8 +48,17 @@ def tracer_images(work):
     imaging += ["--threshold", "40", "--frames", "1"]
     panels = []
     for case in ("C1", "C4"):
-        rimcl("render", "--case", case, *imaging, "--frame-image", f"{case}.png", "-o",
-              f"{case}.h5", cwd=work)
+        rimcl(
+            "render",
+            "--case",
+            case,
+            *imaging,
+            "--frame-image",
+            f"{case}.png",
+            "-o",
+            f"{case}.h5",
+            cwd=work,
+        )
         with h5py.File(work / f"{case}.h5") as f:
             pixel = float(f.attrs["pixel_size"])
             fov_lo = np.asarray(f.attrs["fov_lo"], dtype=float)
