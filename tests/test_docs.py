@@ -178,3 +178,58 @@ def test_the_api_pages_cite_nothing_outside_the_repository():
             rimcl_docs.drop_design_citations(None, None, None, obj, None, lines)
             left += [f"{info.name}: {line}" for line in lines if "DESIGN" in line]
     assert left == []
+
+
+def _documented_columns(page, group):
+    """Names in backticks in the datasets cell of ``group``'s row of a page's table."""
+    row = re.search(rf"^\| `{group}`[^\n]*\| ([^\n]*) \|$", page, flags=re.MULTILINE)
+    assert row, f"no table row for {group}"
+    return set(re.findall(r"`([A-Za-z][A-Za-z0-9_]*)[` ]", row.group(1)))
+
+
+def test_the_render_file_page_names_every_table_column_and_attribute(device, tmp_path):
+    """A render file holds exactly the groups, columns and root attributes its page lists."""
+    import h5py
+
+    from rimcl.ptv.measure import run_render, write_render
+    from rimcl.scene.config import (
+        CameraConfig,
+        MeasureConfig,
+        RunConfig,
+        TimeConfig,
+        TracerConfig,
+    )
+
+    config = MeasureConfig(
+        camera=CameraConfig(kind="plane", fan=2),
+        tracers=TracerConfig(count=2, seed=0),
+        time=TimeConfig(frames=5),
+        run=RunConfig(device=device, engine="numpy"),
+    )
+    path = write_render(tmp_path / "r.h5", run_render(None, case="C1", config=config))
+    page = (DOCS / "reference/formats/render.md").read_text(encoding="utf-8")
+    with h5py.File(path) as f:
+        groups = set(f)
+        for group in groups:
+            columns = set(f[group])
+            like = {"velocity_fit": "velocity", "acceleration_fit": "acceleration"}
+            documented = _documented_columns(page, like.get(group, group))
+            attrs = set(f[group].attrs)
+            assert columns <= documented, f"{group}: undocumented {columns - documented}"
+            # what the page lists for a group is there (or is one of its attributes)
+            listed = documented - columns - attrs - groups
+            if group in like.values():
+                assert listed == set(), f"{group}: documented, not written: {listed}"
+        root = set(f.attrs)
+    documented_root = set(
+        re.findall(r"`([A-Za-z][A-Za-z0-9_]*)[` ]", page[: page.index("| group |")])
+    )
+    assert root <= documented_root, f"undocumented root attributes {root - documented_root}"
+    assert groups == {
+        "tracers",
+        "velocity",
+        "acceleration",
+        "velocity_fit",
+        "acceleration_fit",
+        "rays",
+    }
