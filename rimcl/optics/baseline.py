@@ -40,7 +40,7 @@ def _jit(cache=True, **options):
     """numba.njit with an on-disk cache (the first compile takes ~20 s), or nothing."""
     if numba is None:
         return lambda function: function
-    return numba.njit(cache=cache, **options)
+    return numba.njit(cache=cache, error_model="numpy", **options)
 
 
 @_jit(inline="always")
@@ -57,11 +57,16 @@ def _cell(u, count, periodic):
 
 @_jit(inline="always")
 def _blend(nodes, c, i1, j1, w1, i2, j2, w2, i3, j3, w3):
-    """Component ``c`` of the nodes, trilinear: along x1, then x2, then x3."""
-    a00 = nodes[i3, i2, i1, c] + w1 * (nodes[i3, i2, j1, c] - nodes[i3, i2, i1, c])
-    a01 = nodes[i3, j2, i1, c] + w1 * (nodes[i3, j2, j1, c] - nodes[i3, j2, i1, c])
-    a10 = nodes[j3, i2, i1, c] + w1 * (nodes[j3, i2, j1, c] - nodes[j3, i2, i1, c])
-    a11 = nodes[j3, j2, i1, c] + w1 * (nodes[j3, j2, j1, c] - nodes[j3, j2, i1, c])
+    """Component ``c`` of the nodes, trilinear in float64: along x1, then x2, then x3."""
+    # each float32 node to float64 first: their differences are not rounded to float32
+    v000, v001 = np.float64(nodes[i3, i2, i1, c]), np.float64(nodes[i3, i2, j1, c])
+    v010, v011 = np.float64(nodes[i3, j2, i1, c]), np.float64(nodes[i3, j2, j1, c])
+    v100, v101 = np.float64(nodes[j3, i2, i1, c]), np.float64(nodes[j3, i2, j1, c])
+    v110, v111 = np.float64(nodes[j3, j2, i1, c]), np.float64(nodes[j3, j2, j1, c])
+    a00 = v000 + w1 * (v001 - v000)
+    a01 = v010 + w1 * (v011 - v010)
+    a10 = v100 + w1 * (v101 - v100)
+    a11 = v110 + w1 * (v111 - v110)
     a0 = a00 + w2 * (a01 - a00)
     a1 = a10 + w2 * (a11 - a10)
     return a0 + w3 * (a1 - a0)
