@@ -41,16 +41,8 @@ from rimcl.core.provenance import to_json, versions
 from rimcl.imaging.engine import FAN_CPU_LANES
 from rimcl.optics.bench import synthetic_density
 from rimcl.optics.rays import fan_rays, scene_for
-from rimcl.optics.trace import (
-    CPU_LANES,
-    INTERPOLATIONS,
-    POCL_FLOAT_LANES,
-    PRECISIONS,
-    KernelShape,
-    _default_max_steps,
-    default_kernel_shape,
-    default_step,
-)
+from rimcl.optics.shapes import CPU_LANES, POCL_FLOAT_LANES, KernelShape, default_kernel_shape
+from rimcl.optics.trace import INTERPOLATIONS, PRECISIONS, _default_max_steps, default_step
 
 
 def make_field(name):

@@ -37,12 +37,8 @@ from rimcl.imaging.frames import Imaging, empty_columns, image_batch
 from rimcl.imaging.render import FrameImage
 from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS
 from rimcl.optics.camera import Scene, seed_tracers
-from rimcl.optics.trace import (
-    STATUS_NAMES,
-    default_step,
-    straight_path_limit,
-    straight_rays,
-)
+from rimcl.optics.straight import straight_path_limit, straight_rays
+from rimcl.optics.trace import STATUS_NAMES, default_step
 from rimcl.optics.tracing import trace_rays
 from rimcl.ptv.track import (
     SheetVelocity,
