@@ -86,3 +86,38 @@ def test_a_tiny_tuning_run_keeps_the_fastest_shape(device, cache):
     assert stored["shape"] == entry["shape"] and stored["workload"]["field_nodes"] == 10
     assert not list(cache.parent.glob("*.part"))
     assert shapes.default_kernel_shape(device) == fastest
+
+
+def test_devices_shows_the_shape_in_use_and_bench_needs_out_or_tune(device, cache):
+    """`rimcl devices` shows the rule until a shape is measured, then the measured one;
+    `rimcl bench` without --out or --tune is one clear line."""
+    from click.testing import CliRunner
+
+    from rimcl.cli.main import cli
+
+    def listed():
+        result = CliRunner().invoke(cli, ["devices", "--json"])
+        assert result.exit_code == 0, result.output
+        mine = [e for e in json.loads(result.output) if e["device"] == device.name.strip()]
+        return mine[0]["kernel_shape"]
+
+    shown = listed()
+    assert shown["source"] == "rule"
+    assert KernelShape(shown["lanes"], shown["pocl_fast"], shown["group"]) == shapes.rule_shape(
+        device
+    )
+    measured = KernelShape(lanes=2, pocl_fast=False, group=8)
+    entry = {"shape": measured.describe(), "measurements": [{"ray_steps_per_s": 1.5e7}]}
+    shapes._write_cache(cache, shapes.device_key(device), entry)
+    shown = listed()
+    assert shown["source"] == "measured" and shown["ray_steps_per_s"] == 1.5e7
+    assert (shown["lanes"], shown["group"]) == (2, 8)
+    table = CliRunner().invoke(cli, ["devices"])
+    assert "2 lanes, group 8 (measured)" in table.output
+    refused = CliRunner().invoke(cli, ["bench"])
+    assert refused.exit_code != 0
+    assert (
+        refused.output.strip()
+        .splitlines()[-1]
+        .endswith("give --out DIR for the sweep, or --tune to measure kernel shapes")
+    )

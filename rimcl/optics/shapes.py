@@ -216,6 +216,43 @@ def tuned_entry(device):
     return entry
 
 
+def shape_in_use(device):
+    """The shape ``device`` traces with now, and where it comes from, without tuning.
+
+    Returns
+    -------
+    dict
+        :meth:`KernelShape.describe` of the default trace's shape, plus ``source``:
+        ``measured`` (with ``measured``, the time, and ``ray_steps_per_s``), ``rule``
+        (``RIMCL_TUNE=off``, or not yet measured: it is on first use in mode ``auto``).
+    """
+    mode = tune_mode()
+    entry = None
+    if mode != "off":
+        entry = _read_cache(cache_path()).get(device_key(device))
+        entry = entry if entry is not None and _valid_entry(entry) else None
+    if entry is None:
+        return {**rule_shape(device).describe(), "source": "rule", "mode": mode}
+    rates = [m.get("ray_steps_per_s") for m in entry.get("measurements", [])]
+    rates = [rate for rate in rates if isinstance(rate, (int, float))]
+    return {
+        **KernelShape(**entry["shape"]).describe(),
+        "source": "measured",
+        "mode": mode,
+        "measured": entry.get("measured"),
+        "ray_steps_per_s": max(rates) if rates else None,
+    }
+
+
+def describe_shape(shape):
+    """One line for tables: ``16 lanes, PoCL switch, group 64``."""
+    parts = [f"{shape['lanes']} lane{'s' if shape['lanes'] > 1 else ''}"]
+    if shape["pocl_fast"]:
+        parts.append("PoCL switch")
+    parts.append(f"group {shape['group']}" if shape["group"] else "group auto")
+    return ", ".join(parts)
+
+
 def _valid_entry(entry):
     try:
         KernelShape(**entry["shape"])
