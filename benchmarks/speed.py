@@ -30,6 +30,7 @@ camera: 30 tracers in the sheet with a 32 x 32 fan each.
 """
 
 import argparse
+import importlib.util
 import statistics
 import time
 
@@ -116,6 +117,9 @@ def main():
         )
 
     numba_trace = independent = None
+    if not args.no_numba and importlib.util.find_spec("numba") is None:
+        print("numba is not installed: no numba baselines (ratios n/a)")
+        args.no_numba = True
     if not args.no_numba:
         from numba_independent import trace_field as independent_trace
 
