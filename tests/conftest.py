@@ -11,6 +11,9 @@ import pytest
 from rimcl.core.errors import RimclError
 
 REQUIRE_OPENCL = os.environ.get("RIMCL_REQUIRE_OPENCL") == "1"
+# the rule-based kernel shapes: no timed tuning of a device's shapes during the suite,
+# nor a user's cached shapes (tests of the tuning set RIMCL_TUNE and RIMCL_SHAPE_CACHE)
+os.environ["RIMCL_TUNE"] = "off"
 
 
 def _devices():

@@ -11,7 +11,7 @@ exit face ``x1 = x_end``, carried through the window (with the fluid's index at 
 point), and imaged by the lens (:meth:`RigCamera.image_of_rays`). The
 tracer's image centroid is the mean of its rays' image points (the optics part of the
 error budget: no pixels, equal weights). Through a uniform field the rays are straight
-lines (:func:`rimcl.optics.trace.straight_rays`), exactly.
+lines (:func:`rimcl.optics.straight.straight_rays`), exactly.
 
 The number of rays is chosen by convergence (:func:`choose_ray_count`): the smallest count
 in ``1, 4, 8, 16, …`` whose centroids agree with the next count's within a tolerance (px)
@@ -26,7 +26,7 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.fields.field import Field
 from rimcl.optics.reference import sample_field, trace_rays_reference
-from rimcl.optics.trace import straight_rays
+from rimcl.optics.straight import straight_rays
 
 
 @dataclasses.dataclass(frozen=True)
