@@ -38,10 +38,13 @@ import json
 import logging
 import os
 import re
+import signal
+import socket
 import threading
 import time
 import uuid
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path
@@ -56,6 +59,10 @@ SHARD_DIR = "shards"
 #: Host memory (bytes) a worker may keep of a case's loaded frames for its next shard.
 FRAME_CACHE_BYTES = 4 << 30
 INSTALL_HINT = 'pip install "rimcl[distributed]"'
+#: Seconds a scheduler address has to accept a connection and send Dask's handshake.
+PROBE_SECONDS = 5.0
+#: Dask's default scheduler port, for an address without one.
+DEFAULT_PORT = 8786
 
 
 def parse_scheduler(spec):
@@ -81,6 +88,141 @@ def parse_scheduler(spec):
         f"scheduler {spec!r} (run.scheduler, --scheduler) must be local:N with N >= 1 "
         "or a Dask scheduler address such as tcp://HOST:8786"
     )
+
+
+def usable_cores():
+    """CPU cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return os.cpu_count() or 1
+
+
+def _printable(data, limit=40):
+    text = data[:limit].decode("latin-1")
+    return "".join(c if c.isprintable() else "." for c in text)
+
+
+def probe_scheduler(address, timeout=PROBE_SECONDS):
+    """Check that a Dask scheduler answers at ``address``, within ``timeout`` seconds.
+
+    A Dask scheduler sends its handshake (a msgpack map naming its Python and pickle
+    protocol) as soon as it accepts a TCP connection; Dask's client waits for it without
+    a limit, so a listener that says nothing (an HTTP server, a stopped process) would
+    hang the study. Addresses of other schemes than ``tcp://`` (``tls://`` needs the
+    certificates; ``ucx://``, ``ws://``...) are only checked for a listening port where
+    they have one.
+
+    Parameters
+    ----------
+    address : str
+        ``scheme://HOST[:PORT]`` (port default :data:`DEFAULT_PORT`).
+    timeout : float
+        Seconds to connect, and again to receive the handshake.
+
+    Returns
+    -------
+    str
+        What answered, for the log ("a Dask scheduler (Python 3.11.7)").
+
+    Raises
+    ------
+    RimclError
+        Nothing listens, no machine answers, or something that is not a Dask scheduler.
+    """
+    parts = urlsplit(address)
+    try:
+        host, port = parts.hostname, parts.port or DEFAULT_PORT
+    except ValueError:
+        raise RimclError(f"scheduler address {address!r} has no valid port") from None
+    if parts.scheme not in ("tcp", "tls") or not host:
+        return f"a {parts.scheme}:// address (not checked before connecting)"
+    where = f"the Dask scheduler address {address}"
+    try:
+        connection = socket.create_connection((host, port), timeout=timeout)
+    except socket.gaierror as exc:
+        raise RimclError(f"cannot resolve host {host!r} of {where} ({exc.strerror})") from None
+    except ConnectionRefusedError:
+        raise RimclError(f"nothing listens at {where} (connection refused)") from None
+    except TimeoutError:
+        raise RimclError(
+            f"no answer from {where} within {timeout:g} s (no such machine, or a firewall)"
+        ) from None
+    except OSError as exc:
+        raise RimclError(f"cannot reach {where}: {exc.strerror or exc}") from None
+    with connection:
+        if parts.scheme == "tls":
+            return "a listening port (TLS: the handshake is Dask's)"
+        received = b""
+        deadline = time.monotonic() + timeout
+        try:
+            # Dask's TCP frames: 8 bytes of total length, 8 of frame count, 8 per frame size
+            while len(received) < 16 or len(received) < 8 + int.from_bytes(received[:8], "little"):
+                left = deadline - time.monotonic()
+                if left <= 0 or len(received) > 1 << 16:
+                    break
+                connection.settimeout(left)
+                chunk = connection.recv(4096)
+                if not chunk:
+                    break
+                received += chunk
+        except TimeoutError:
+            pass
+        except OSError as exc:
+            raise RimclError(f"{where} dropped the connection: {exc.strerror or exc}") from None
+    if not received:
+        raise RimclError(
+            f"{where} accepted the connection but sent nothing within {timeout:g} s: not a "
+            "Dask scheduler (an HTTP server or another service?)"
+        )
+    if b"pickle-protocol" not in received:
+        raise RimclError(
+            f"{where} answered {_printable(received)!r}: not a Dask scheduler's handshake"
+        )
+    return "a Dask scheduler" + _handshake_python(received)
+
+
+def _handshake_python(received):
+    """ " (Python X.Y.Z)" from a Dask handshake's bytes, "" where it cannot be read."""
+    try:
+        import msgpack
+
+        count = int.from_bytes(received[8:16], "little")
+        start = 16 + 8 * count
+        info = msgpack.unpackb(received[start:], strict_map_key=False)
+        return " (Python " + ".".join(str(part) for part in info["python"]) + ")"
+    except Exception:  # an older or newer Dask frames its handshake otherwise: no version
+        return ""
+
+
+def check_scheduler(spec):
+    """Refuse, before anything is written, a scheduler the study cannot use.
+
+    ``local:N`` above the cores this process may use is refused (each worker measures
+    on one core; more only compete for them); an address must answer as a Dask
+    scheduler within :data:`PROBE_SECONDS` (:func:`probe_scheduler`).
+
+    Parameters
+    ----------
+    spec : str
+        See :func:`parse_scheduler`.
+
+    Returns
+    -------
+    str
+        One line saying what will measure.
+    """
+    kind, value = parse_scheduler(spec)
+    _import_distributed(spec)
+    if kind == "local":
+        cores = usable_cores()
+        if value > cores:
+            raise RimclError(
+                f"scheduler local:{value} asks for {value} worker processes, but this "
+                f"machine gives rimcl {cores} core(s): use local:{cores} or fewer"
+            )
+        return f"{value} local worker processes"
+    return f"scheduler {value}: {probe_scheduler(value, timeout=PROBE_SECONDS)} answered"
 
 
 def shard_ranges(count, size):
@@ -446,6 +588,20 @@ def _quiet_dask():
 
 
 @contextlib.contextmanager
+def _sigint_ignored():
+    """SIGINT ignored while child processes start (they inherit it), where signals can be
+    set (the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
 def connect(spec, field_path="", device_spec=None, report=None):
     """A Dask client for ``spec``, every worker set up with a :class:`RimclPlugin`.
 
@@ -471,6 +627,7 @@ def connect(spec, field_path="", device_spec=None, report=None):
         Name of the workers' :class:`RimclPlugin`, for :func:`measure_shard`.
     """
     say = report or (lambda line: None)
+    answered = check_scheduler(spec)
     kind, value = parse_scheduler(spec)
     distributed = _import_distributed(spec)
     import dask
@@ -486,27 +643,31 @@ def connect(spec, field_path="", device_spec=None, report=None):
                     {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
                 )
             )
-            cluster = stack.enter_context(
-                distributed.LocalCluster(
-                    n_workers=value,
-                    threads_per_worker=1,
-                    processes=True,
-                    host="127.0.0.1",
-                    dashboard_address="127.0.0.1:0",
-                    # each worker holds its own copy of the field: let the OS, not a
-                    # per-worker share of the memory, decide what fits
-                    memory_limit=0,
-                    silence_logs=logging.ERROR,
+            # Ctrl-C reaches every process of the terminal's group: workers started with
+            # SIGINT ignored leave it to this process, which stops them (one line, not a
+            # traceback per worker)
+            with _sigint_ignored():
+                cluster = stack.enter_context(
+                    distributed.LocalCluster(
+                        n_workers=value,
+                        threads_per_worker=1,
+                        processes=True,
+                        host="127.0.0.1",
+                        dashboard_address="127.0.0.1:0",
+                        # each worker holds its own copy of the field: let the OS, not a
+                        # per-worker share of the memory, decide what fits
+                        memory_limit=0,
+                        silence_logs=logging.ERROR,
+                    )
                 )
-            )
             client = stack.enter_context(distributed.Client(cluster))
-            say(f"Dask: {value} local worker processes; dashboard {cluster.dashboard_link}")
+            say(f"Dask: {answered}; dashboard {cluster.dashboard_link}")
         else:
             try:
                 client = stack.enter_context(distributed.Client(value, timeout="30s"))
-            except OSError as exc:
+            except (OSError, TimeoutError) as exc:
                 raise RimclError(f"cannot reach the Dask scheduler at {value}: {exc}") from None
-            say(f"Dask: scheduler {value}; dashboard {client.dashboard_link}")
+            say(f"Dask: {answered}; dashboard {client.dashboard_link}")
         field = str(Path(field_path).resolve()) if field_path else ""
         plugin = RimclPlugin(field, device_spec or None)
         client.register_plugin(plugin)
@@ -516,7 +677,12 @@ def connect(spec, field_path="", device_spec=None, report=None):
             say(f"{len(devices)} workers: " + ", ".join(f"{n} x {d}" for d, n in kinds.items()))
         else:
             say("no worker has joined yet: the tasks wait for workers")
-        yield client, plugin.name
+        try:
+            yield client, plugin.name
+        except KeyboardInterrupt:
+            # stopping busy workers is what Ctrl-C asked for: not a warning per worker
+            logging.getLogger("distributed").setLevel(logging.ERROR)
+            raise
 
 
 def _remove_orphans(directory):
@@ -525,7 +691,9 @@ def _remove_orphans(directory):
         orphan.unlink(missing_ok=True)
 
 
-def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, report=None):
+def measure_cases(
+    scene, out_dir, scheduler, *, force=False, progress=False, report=None, connected=None
+):
     """Measure every case of a study on a Dask cluster into ``cases/<case>.h5``.
 
     Cases whose file exists are kept (unless ``force``); of the others, only shards
@@ -545,6 +713,9 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
         A progress bar of finished shards (on a terminal).
     report : callable, optional
         Called with one line of text per step.
+    connected : callable, optional
+        Called without arguments once the workers are set up, before any task (the study
+        writes its ``scene.toml`` then, not for a run that could not connect).
 
     Returns
     -------
@@ -572,6 +743,8 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
         else:
             todo.append(name)
     if not todo:
+        if connected is not None:
+            connected()
         return ran, skipped, seconds
     stamp = scene_stamp(scene)
     for name in names:
@@ -584,6 +757,8 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
 
     field, device = scene["field"]["path"], scene["run"]["device"]
     with connect(scheduler, field, device, say) as (client, plugin):
+        if connected is not None:
+            connected()
         futures, waiting = _submit(client, plugin, scene, out_dir, names, todo, shards)
         pending = {name: len(tasks) for name, tasks in waiting.items()}
         worker_seconds = dict.fromkeys(todo, 0.0)

@@ -322,6 +322,14 @@ def run_study(
     all_cases = study_cases(scene)
     cases = all_cases if mode != "piv" else []
     _check_resources(scene)
+    scheduler = scheduler or scene["run"]["scheduler"]
+    if scheduler:
+        from rimcl.study.distributed import check_scheduler
+
+        # every mode: a scheduler that cannot serve is refused before anything is written
+        answered = check_scheduler(scheduler)
+        if not cases:
+            say(f"Dask: {answered}, not used: PIV cases are measured in this process")
     with _claimed(out_dir):
         removed = _remove_stale_parts(out_dir)
         if removed:
@@ -332,13 +340,17 @@ def run_study(
         scene_file = _SceneFile(out_dir, scene)
         ran, skipped, seconds = [], [], {}
         todo = cases
-        scheduler = scheduler or scene["run"]["scheduler"]
         if scheduler and cases:
             from rimcl.study.distributed import measure_cases
 
-            scene_file.settle()
             ran, skipped, seconds = measure_cases(
-                scene, out_dir, scheduler, force=force, progress=progress, report=say
+                scene,
+                out_dir,
+                scheduler,
+                force=force,
+                progress=progress,
+                report=say,
+                connected=scene_file.settle,
             )
             todo = []  # the cluster measured every case
         references = {}  # threshold -> reference images (they depend on it, not on the case)
