@@ -96,3 +96,38 @@ def test_cli_all_zero_frames_say_n_a(tmp_path):
     assert result.exit_code == 0, result.output
     assert "49 invalid, 0 of them replaced" in result.output
     assert "mean displacement n/a" in result.output and "nan" not in result.output
+
+
+def test_piv_memory_is_estimated_before_it_is_spent(monkeypatch):
+    from rimcl.core import memory
+    from rimcl.core.errors import RimclError
+    from rimcl.piv.analysis import check_piv_memory
+
+    monkeypatch.setattr(memory, "host_available", lambda: 1 << 30)
+    check_piv_memory((1024, 1024), PivSettings())  # about 0.4 GiB: fits
+    # --overlap 0.999: a window at every pixel, 986049 windows of 32 x 32 px
+    with pytest.raises(RimclError, match=r"needs about 6\d\.\d GiB .*--overlap.*--window"):
+        analyze_pair(np.zeros((1024, 1024)), np.zeros((1024, 1024)), PivSettings(overlap=0.999))
+
+
+def test_a_tiff_that_expands_beyond_memory_is_refused_from_its_header(tmp_path, monkeypatch):
+    import tifffile
+
+    from rimcl.core import memory
+    from rimcl.piv import analysis
+
+    path = tmp_path / "big.tif"
+    tifffile.imwrite(path, np.zeros((8000, 8000), np.uint16), compression="zlib")
+    assert path.stat().st_size < 1 << 20  # 122 MiB of pixels in a small file
+    monkeypatch.setattr(memory, "host_available", lambda: 1 << 30)
+
+    def never(path):
+        raise AssertionError("the pixels were read")
+
+    monkeypatch.setattr(analysis, "read_tiff", never)
+    args = ["piv", "analyze", str(path), str(path), "-o", str(tmp_path / "v.h5")]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 1
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and "8000 x 8000 px frames" in lines[0], result.output
+    assert "--window" in lines[0] and "tracers" not in lines[0]

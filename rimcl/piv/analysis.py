@@ -88,6 +88,16 @@ EDGE_MARGIN = 2
 SIGNAL_THRESHOLD = 6.0
 
 
+#: Peak host bytes per image pixel of a PIV analysis: the frames in float64, their
+#: backgrounds, B-spline coefficients, deformed frames, masks and displacement fields
+#: (tracemalloc: 32 for one pass, 86-90 with deformation).
+PIV_BYTES_PER_PIXEL = 128
+#: Peak host bytes per pixel of all windows of a pass (windows overlap, so this is
+#: windows x side²): extracted windows of both frames, float64 copies, spectra,
+#: correlation planes and the signal test (tracemalloc: 56-57).
+PIV_BYTES_PER_WINDOW_PIXEL = 64
+
+
 @dataclasses.dataclass(frozen=True)
 class PivSettings:
     """How an image pair is correlated.
@@ -569,13 +579,68 @@ def remove_background(image, size):
     return image - background
 
 
-def _read_pair(image_a, image_b):
+def check_piv_memory(shape, settings, what="PIV"):
+    """Refuse, before anything is allocated, an analysis that cannot fit in host memory.
+
+    Parameters
+    ----------
+    shape : tuple of 2 int
+        Frame ``(rows, columns)``.
+    settings : PivSettings
+    what : str
+        For the message.
+
+    Raises
+    ------
+    RimclError
+        The size needed and available, and which settings need less.
+    """
+    from rimcl.core.memory import check_host
+
+    pixels = int(shape[0]) * int(shape[1])
+    window_pixels = 0
+    for size in settings.window_sizes():
+        grid = WindowGrid.for_image(shape, size, settings.overlap)
+        window_pixels = max(window_pixels, len(grid.rows) * len(grid.cols) * size * size)
+    needed = PIV_BYTES_PER_PIXEL * pixels + PIV_BYTES_PER_WINDOW_PIXEL * window_pixels
+    check_host(
+        needed,
+        f"{what} of {shape[1]} x {shape[0]} px frames with {settings.window} px windows "
+        f"at overlap {settings.overlap:g} ({window_pixels / pixels:.3g} window pixels per "
+        "frame pixel)",
+        "use a smaller --overlap, a larger --window or smaller frames",
+    )
+
+
+def tiff_shape(path):
+    """``(rows, columns)`` and dtype of the first image of a TIFF file, from its header.
+
+    Returns
+    -------
+    shape : tuple of int
+    dtype : numpy.dtype
+    """
+    import tifffile
+
+    path = Path(path)
+    if not path.is_file():
+        raise RimclError(f"image {path} does not exist")
+    try:
+        with tifffile.TiffFile(path) as tif:
+            series = tif.series[0]
+            return tuple(int(n) for n in series.shape), np.dtype(series.dtype)
+    except Exception as exc:  # tifffile raises many types for a bad file
+        raise RimclError(f"{path} is not a readable TIFF image ({exc})") from None
+
+
+def _read_pair(image_a, image_b, settings):
     a = np.asarray(image_a)
     b = np.asarray(image_b)
     if a.ndim != 2 or b.ndim != 2:
         raise RimclError(f"PIV needs two grey images (2-D), got shapes {a.shape} and {b.shape}")
     if a.shape != b.shape:
         raise RimclError(f"the two PIV images differ in shape: {a.shape} and {b.shape}")
+    check_piv_memory(a.shape, settings)
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
         raise RimclError("a PIV image holds NaN or infinite values")
     return a.astype(np.float64), b.astype(np.float64)
@@ -595,7 +660,7 @@ def analyze_pair(image_a, image_b, settings=None):
     PivResult
     """
     settings = PivSettings() if settings is None else settings
-    a, b = _read_pair(image_a, image_b)
+    a, b = _read_pair(image_a, image_b, settings)
     sigma_a, sigma_b = noise_sigma(np.asarray(image_a)), noise_sigma(np.asarray(image_b))
     signal_a, signal_b = a, b
     first = max(settings.window_sizes())
@@ -750,9 +815,22 @@ def analyze_files(path_a, path_b, output, settings=None, overwrite=False):
     -------
     PivResult
     """
+    from rimcl.core.memory import check_host
     from rimcl.core.provenance import check_output
 
     check_output(output, overwrite)
+    settings = PivSettings() if settings is None else settings
+    headers = [tiff_shape(path) for path in (path_a, path_b)]
+    for path, (shape, dtype) in zip((path_a, path_b), headers, strict=True):
+        if len(shape) != 2:
+            raise RimclError(
+                f"{path} must hold one grey image (2-D), got an array of shape {shape}"
+            )
+        # a compressed file may expand to far more than its size on disk
+        check_host(2 * np.prod(shape, dtype=float) * dtype.itemsize, f"reading {path} {shape}")
+    if headers[0][0] != headers[1][0]:
+        raise RimclError(f"the two PIV images differ in shape: {headers[0][0]} and {headers[1][0]}")
+    check_piv_memory(headers[0][0], settings)
     image_a, image_b = read_tiff(path_a), read_tiff(path_b)
     result = analyze_pair(image_a, image_b, settings)
     inputs = {"image_a": str(Path(path_a).resolve()), "image_b": str(Path(path_b).resolve())}
