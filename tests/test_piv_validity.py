@@ -60,7 +60,7 @@ def test_half_blank_noisy_frames_are_invalid_there(passes, tolerance):
         image = image.astype(np.float64)
         image[:, 64:] = 0  # no particle in the right half: 100 counts of background, noise
         frames.append(np.rint(image + 100 + rng.normal(0, 20, image.shape)).astype(np.uint16))
-    from rimcl.piv.analysis import noise_sigma
+    from rimcl.piv.validity import noise_sigma
 
     assert noise_sigma(frames[0][:, 64:]) == pytest.approx(20, rel=0.1)
     result = _quietly(*frames, PivSettings(window=32, passes=passes))

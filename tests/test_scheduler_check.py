@@ -13,6 +13,7 @@ from click.testing import CliRunner
 from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
 from rimcl.study import distributed as dist
+from rimcl.study import scheduler as sched
 
 pytest.importorskip("distributed")
 
@@ -51,13 +52,13 @@ def chatty_listener():
 def test_a_silent_listener_is_refused_within_seconds(silent_listener):
     start = time.monotonic()
     with pytest.raises(RimclError, match="accepted the connection but sent nothing within 1 s"):
-        dist.probe_scheduler(silent_listener, timeout=1.0)
+        sched.probe_scheduler(silent_listener, timeout=1.0)
     assert time.monotonic() - start < 3
 
 
 def test_a_listener_that_is_not_dask_is_named(chatty_listener):
     with pytest.raises(RimclError, match=r"answered 'SSH-2\.0-OpenSSH_9\.2\.\.': not a Dask"):
-        dist.probe_scheduler(chatty_listener, timeout=2.0)
+        sched.probe_scheduler(chatty_listener, timeout=2.0)
 
 
 def test_nothing_listening_is_refused():
@@ -65,9 +66,9 @@ def test_nothing_listening_is_refused():
         probe.bind(("127.0.0.1", 0))
         port = probe.getsockname()[1]
     with pytest.raises(RimclError, match=r"nothing listens .* \(connection refused\)"):
-        dist.probe_scheduler(f"tcp://127.0.0.1:{port}", timeout=2.0)
+        sched.probe_scheduler(f"tcp://127.0.0.1:{port}", timeout=2.0)
     with pytest.raises(RimclError, match="cannot resolve host"):
-        dist.probe_scheduler("tcp://no-such-host.invalid:8786", timeout=2.0)
+        sched.probe_scheduler("tcp://no-such-host.invalid:8786", timeout=2.0)
 
 
 def test_a_real_scheduler_answers():
@@ -76,15 +77,15 @@ def test_a_real_scheduler_answers():
     with distributed.LocalCluster(
         n_workers=0, processes=False, protocol="tcp", host="127.0.0.1", dashboard_address=":0"
     ) as cluster:
-        answer = dist.probe_scheduler(cluster.scheduler_address, timeout=5.0)
+        answer = sched.probe_scheduler(cluster.scheduler_address, timeout=5.0)
     assert answer.startswith("a Dask scheduler (Python 3.")
 
 
 def test_local_workers_are_capped_at_the_cores(monkeypatch):
-    monkeypatch.setattr(dist, "usable_cores", lambda: 2)
-    assert dist.check_scheduler("local:2") == "2 local worker processes"
+    monkeypatch.setattr(sched, "usable_cores", lambda: 2)
+    assert sched.check_scheduler("local:2") == "2 local worker processes"
     with pytest.raises(RimclError, match=r"local:3 asks for 3 worker .* 2 core\(s\): use local:2"):
-        dist.check_scheduler("local:3")
+        sched.check_scheduler("local:3")
 
 
 @pytest.mark.parametrize("mode", ["ptv", "piv", "both"])
@@ -92,7 +93,7 @@ def test_local_workers_are_capped_at_the_cores(monkeypatch):
 def test_every_mode_refuses_a_bad_scheduler_before_writing(
     tmp_path, monkeypatch, silent_listener, mode, spec
 ):
-    monkeypatch.setattr(dist, "PROBE_SECONDS", 1.0)
+    monkeypatch.setattr(sched, "PROBE_SECONDS", 1.0)
     spec = silent_listener if spec == "silent" else spec
     out = tmp_path / "study"
     args = ["study", "--out", str(out), "--mode", mode, "--scheduler", spec, "--no-progress"]

@@ -300,7 +300,8 @@ def run_study(
     scheduler : str, optional
         Measure the cases on Dask (``"local:N"`` or a scheduler address; default: the
         scene's ``run.scheduler``, "" = this process): see :mod:`rimcl.study.distributed`.
-        ``case_seconds`` are then worker seconds.
+        ``case_seconds`` are then worker seconds. Checked in every mode before anything
+        is written (:func:`rimcl.study.scheduler.check_scheduler`).
 
     Returns
     -------
