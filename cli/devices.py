@@ -40,4 +40,7 @@ def devices(as_json):
         click.echo(
             "  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)).rstrip()
         )
-    click.echo("* = default choice (RIMCL_DEVICE, then a GPU, then a CPU)")
+    click.echo(
+        "* = default choice (RIMCL_DEVICE, then a usable GPU, then a usable CPU; "
+        "PoCL first, newest PoCL and LLVM first)"
+    )
