@@ -35,6 +35,7 @@ are computed once and reused.
 import contextlib
 import dataclasses
 import json
+import os
 import re
 import shutil
 import time
@@ -128,6 +129,25 @@ def _written_by_a_study(out_dir):
         return "study_dir" in config and "scene" in config and (out_dir / "scene.toml").exists()
     except (OSError, ValueError, KeyError, TypeError):
         return False
+
+
+#: The folders a study writes into and removes files from.
+STUDY_FOLDERS = ("cases", "piv", "shards", "figures")
+
+
+def _check_no_links(out_dir):
+    """Refuse a study folder (or a case's shard folder) that is a symbolic link: what the
+    study writes, replaces and removes there would land outside the study directory."""
+    folders = [out_dir / name for name in STUDY_FOLDERS]
+    shards = out_dir / "shards"
+    if shards.is_dir() and not shards.is_symlink():
+        folders += sorted(shards.iterdir())
+    for folder in folders:
+        if folder.is_symlink():
+            raise RimclError(
+                f"{folder} is a symbolic link (to {os.readlink(folder)}); a study writes only "
+                "inside its directory: make it a real folder, or use another --out"
+            )
 
 
 @contextlib.contextmanager
@@ -323,6 +343,7 @@ def run_study(
     all_cases = study_cases(scene)
     cases = all_cases if mode != "piv" else []
     _check_resources(scene)
+    _check_no_links(out_dir)
     scheduler = scheduler or scene["run"]["scheduler"]
     if scheduler:
         from rimcl.study.distributed import check_scheduler
@@ -332,6 +353,7 @@ def run_study(
         if not cases:
             say(f"Dask: {answered}, not used: PIV cases are measured in this process")
     with _claimed(out_dir):
+        _check_no_links(out_dir)  # again under the lock: nothing changes it from here on
         removed = _remove_stale_parts(out_dir)
         if removed:
             say(f"removed {removed} partial file(s) left by an interrupted run")
