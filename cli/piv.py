@@ -266,15 +266,11 @@ def render(
       rimcl piv render --case C4 --camera pupil --pupil-rays 32 -o water
       rimcl piv analyze water_field_A.tif water_field_B.tif -o water_vectors.h5
     """
-    from rimcl.fields.fieldfile import case_arguments
+    from rimcl.fields.field_loading import case_arguments
     from rimcl.piv.analysis import PivSettings
-    from rimcl.piv.images import (
-        PivConfig,
-        PivImaging,
-        check_outputs,
-        run_piv_render,
-        write_piv_render,
-    )
+    from rimcl.piv.imaging_config import PivImaging
+    from rimcl.piv.render import PivConfig, run_piv_render
+    from rimcl.piv.truth import check_outputs, write_piv_render
     from rimcl.scene.config import CameraConfig, IntegratorConfig, RunConfig
 
     check_outputs(prefix, overwrite)

@@ -53,7 +53,7 @@ def stats(render_files, out_dir, no_figures, overwrite):
     Relative errors are fractions; positions are in units of the traced depth L. Lines
     printed per case: systematic ± random relative error (mean ± std of ε/truth).
     """
-    from rimcl.stats.compute import run_stats
+    from rimcl.stats.document import run_stats
 
     document = run_stats(render_files, out_dir, overwrite=overwrite, figures=not no_figures)
     echo_case_lines(document)

@@ -112,7 +112,7 @@ def trace(
     from rimcl.core.memory import check_field_upload, check_trace_memory
     from rimcl.core.provenance import check_output
     from rimcl.fields.field import Field, analytic_field
-    from rimcl.fields.fieldfile import case_arguments, load_field
+    from rimcl.fields.field_loading import case_arguments, load_field
     from rimcl.optics.rays import fan_rays, read_rays, scene_for, write_trace
     from rimcl.optics.tracing import trace_rays
 

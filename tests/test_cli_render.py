@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from rimcl.cli.main import cli
-from rimcl.fields.fieldfile import write_field
+from rimcl.fields.field_writer import write_field
 
 QUICK = ["--tracers", "4", "--fan", "4", "--pixels", "1024"]
 

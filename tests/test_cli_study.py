@@ -12,8 +12,9 @@ from click.testing import CliRunner
 from synthetic_render import write_render_file
 
 from rimcl.cli.main import cli
-from rimcl.scene.load import default_scene, load_scene
-from rimcl.stats.compute import load_render
+from rimcl.scene.keys import default_scene
+from rimcl.scene.load import load_scene
+from rimcl.stats.render_file import load_render
 
 QUICK = ["--tracers", "6", "--fan", "6", "--no-progress", "--no-figures"]
 

@@ -7,7 +7,8 @@ import pytest
 
 from rimcl.core.errors import RimclError
 from rimcl.fields.crop import CroppedSource
-from rimcl.fields.fieldfile import FieldFile, write_field
+from rimcl.fields.field_reader import FieldFile
+from rimcl.fields.field_writer import write_field
 from rimcl.imaging.frames import Imaging, image_batch
 from rimcl.imaging.render import Renderer
 from rimcl.scene.load import load_scene

@@ -19,7 +19,7 @@ from click.testing import CliRunner
 
 from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
-from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.field_reader import FieldFile
 from rimcl.fields.sample import sample_path
 from rimcl.ptv.measure import run_render
 from rimcl.scene.config import MeasureConfig
@@ -217,9 +217,9 @@ class DieWhileWriting(distributed.WorkerPlugin):
         self.case, self.target, self.marker = case, target, marker
 
     def setup(self, worker):
-        import rimcl.ptv.measure
+        import rimcl.ptv.render_file
 
-        stamp = rimcl.ptv.measure.stamp_h5
+        stamp = rimcl.ptv.render_file.stamp_h5
 
         def stamp_then_die(h5obj, *args, **kwargs):
             stamp(h5obj, *args, **kwargs)  # the file now holds attributes but no tables
@@ -229,7 +229,7 @@ class DieWhileWriting(distributed.WorkerPlugin):
                     Path(self.marker).write_text(name)
                     os._exit(1)
 
-        rimcl.ptv.measure.stamp_h5 = stamp_then_die
+        rimcl.ptv.render_file.stamp_h5 = stamp_then_die
 
 
 def test_a_killed_worker_loses_nothing_and_a_rerun_redoes_only_missing_shards(

@@ -9,7 +9,8 @@ from PIL import Image
 
 from rimcl.cli.main import cli
 from rimcl.fields.cases import CASES, PAPER_DELTA_N_MAX
-from rimcl.fields.fieldfile import FieldFile, write_field
+from rimcl.fields.field_reader import FieldFile
+from rimcl.fields.field_writer import write_field
 from rimcl.fields.sample import sample_path
 
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from rimcl.fields.derivatives import gradient
-from rimcl.fields.fieldfile import load_field, write_field
+from rimcl.fields.field_loading import load_field
+from rimcl.fields.field_writer import write_field
 
 
 def _periodic_grid(counts, lengths):

@@ -7,7 +7,9 @@ import pytest
 import rimcl
 from rimcl.core.errors import RimclError
 from rimcl.fields.cases import CASES, PAPER_DELTA_N_MAX, resolve_k_rho
-from rimcl.fields.fieldfile import FieldFile, load_field, write_field
+from rimcl.fields.field_loading import load_field
+from rimcl.fields.field_reader import FieldFile
+from rimcl.fields.field_writer import write_field
 from rimcl.fields.sample import sample_path
 
 SHAPE = (6, 5, 8)  # (n3, n2, n1)

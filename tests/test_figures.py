@@ -11,15 +11,11 @@ from PIL import Image
 from synthetic_budget import write_budget_file
 from synthetic_render import write_render_file
 
-from rimcl.stats.compute import compute_stats, load_render
-from rimcl.stats.figures import (
-    FIGURE_NAMES,
-    LITERATURE_STUDIES,
-    draw_dt_sweep,
-    draw_figure,
-    write_dt_sweep_figure,
-    write_figures,
-)
+from rimcl.stats.document import compute_stats
+from rimcl.stats.figures import FIGURE_NAMES, draw_figure, write_figures
+from rimcl.stats.figures_dt_sweep import draw_dt_sweep, write_dt_sweep_figure
+from rimcl.stats.figures_rays import LITERATURE_STUDIES
+from rimcl.stats.render_file import load_render
 
 CASES = (
     ("G=0", 0.0, 0.0, 0.0, 0.0),

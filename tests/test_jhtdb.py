@@ -8,7 +8,7 @@ from click.testing import CliRunner
 
 from rimcl.cli.main import cli
 from rimcl.fields.derivatives import gradient
-from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.field_reader import FieldFile
 from rimcl.fields.jhtdb import parse_crop, parse_frames, read_cutouts
 
 NX, NY, NZ = 8, 6, 10  # a full periodic box: x, y, z have 8, 6, 10 nodes over 2π

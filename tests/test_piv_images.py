@@ -1,4 +1,4 @@
-"""PIV image pairs through a field (rimcl.piv.images), errors (rimcl.piv.study), figures."""
+"""PIV image pairs through a field (rimcl.piv.render), errors (rimcl.piv.study), figures."""
 
 import dataclasses
 import json
@@ -12,22 +12,16 @@ from click.testing import CliRunner
 from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
 from rimcl.fields.field import Field
-from rimcl.fields.fieldfile import write_field
+from rimcl.fields.field_writer import write_field
 from rimcl.optics.camera import PupilCamera, Scene
 from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair
-from rimcl.piv.images import (
-    MOTION_3D,
-    MOTION_SHEET,
-    PivConfig,
-    PivImaging,
-    image_pair,
-    run_piv_render,
-    seed_particles,
-    sheet_intensity,
-    window_means,
-)
+from rimcl.piv.frame_pair import image_pair
+from rimcl.piv.imaging_config import PivImaging, seed_particles, sheet_intensity
+from rimcl.piv.render import PivConfig, run_piv_render
 from rimcl.piv.study import load_piv_case, run_piv_case, write_piv_case
-from rimcl.ptv.measure import uniform_like
+from rimcl.piv.tracer_motion import MOTION_3D, MOTION_SHEET
+from rimcl.piv.truth import window_means
+from rimcl.ptv.field_source import uniform_like
 from rimcl.scene.config import CameraConfig, RunConfig
 
 #: 96 px frames, 8 rays per tracer through a pupil, 16 px windows: a case in ~1 s
@@ -173,7 +167,7 @@ def test_sheet_velocity_moves_tracers_in_plane_only(tmp_path, device):
     moved = positions[1, :, 1:] - positions[0, :, 1:]
     np.testing.assert_allclose(moved, np.tile([0.03, -0.02], (len(moved), 1)), atol=1e-9)
     prefix = tmp_path / "sheet"
-    from rimcl.piv.images import write_piv_render
+    from rimcl.piv.truth import write_piv_render
 
     write_piv_render(prefix, result)
     with h5py.File(tmp_path / "sheet_truth.h5") as h5:
@@ -282,7 +276,7 @@ def test_ray_deposit_is_the_exact_renderer():
     from scipy.special import ndtr
 
     from rimcl.imaging.render import Renderer
-    from rimcl.piv.images import deposit_rays
+    from rimcl.piv.frame_pair import deposit_rays
 
     renderer = Renderer("exact", 1.0, (0.0, 0.0), 0.75, 64, 16)
     points = np.array([[10.3, 20.7], [30.5, 12.25], [0.2, 5.0]])  # (column, row)

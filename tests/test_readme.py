@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from rimcl.cli.main import COMMANDS
-from rimcl.scene.load import SCENE_KEYS
+from rimcl.scene.keys import SCENE_KEYS
 from rimcl.stats.figures import FIGURE_NAMES
 
 README = Path(__file__).resolve().parents[1] / "README.md"

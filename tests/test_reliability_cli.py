@@ -17,7 +17,7 @@ from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
 from rimcl.core.memory import check_field_upload
 from rimcl.fields.field import Field
-from rimcl.fields.fieldfile import write_field
+from rimcl.fields.field_writer import write_field
 from rimcl.optics.rays import read_rays
 from rimcl.optics.trace import STATUS_NAMES, _finish
 from rimcl.optics.tracing import trace_rays
@@ -314,7 +314,7 @@ def test_field_info_reads_metadata_only_and_streams_values_on_request(huge_decla
     def no_reading(*args, **kwargs):
         raise AssertionError("field info read frame data")
 
-    monkeypatch.setattr(rimcl.fields.fieldfile.FieldFile, "_read", no_reading)
+    monkeypatch.setattr(rimcl.fields.field_reader.FieldFile, "_read", no_reading)
     info = rimcl.fields.info.describe_field_file(huge_declared)
     assert info["memory_bytes_per_frame"]["field_trilinear"] == 16 * 1024**3
     assert "frames" not in info and "delta_n_max" not in info

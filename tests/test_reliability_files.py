@@ -19,7 +19,8 @@ from hypothesis import strategies as st
 
 from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
-from rimcl.fields.fieldfile import FieldFile, load_field
+from rimcl.fields.field_loading import load_field
+from rimcl.fields.field_reader import FieldFile
 
 #: Examples per property (each runs a few milliseconds to a few tens of milliseconds).
 EXAMPLES = 60

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.field_reader import FieldFile
 from rimcl.fields.sample import sample_path
 from rimcl.optics.camera import Scene, seed_tracers
 from rimcl.ptv.track import (

@@ -7,7 +7,8 @@ from click.testing import CliRunner
 
 from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
-from rimcl.fields.fieldfile import FieldFile, write_field
+from rimcl.fields.field_reader import FieldFile
+from rimcl.fields.field_writer import write_field
 from rimcl.fields.info import describe_field_file
 from rimcl.fields.synth import BoussinesqSolver
 

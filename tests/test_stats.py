@@ -8,15 +8,11 @@ import pytest
 from synthetic_render import write_render_file
 
 from rimcl.core.errors import RimclError
-from rimcl.stats.compute import (
-    angle_deg,
-    case_statistics,
-    compute_stats,
-    error_summary,
-    load_render,
-    pdf_peak,
-    run_stats,
-)
+from rimcl.stats.document import case_statistics, compute_stats, run_stats
+from rimcl.stats.peaks import pdf_peak
+from rimcl.stats.render_file import load_render
+from rimcl.stats.summaries import error_summary
+from rimcl.stats.tables import angle_deg
 
 
 @pytest.fixture

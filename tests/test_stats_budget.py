@@ -7,7 +7,9 @@ from synthetic_budget import write_budget_file
 from synthetic_render import write_render_file
 
 from rimcl.core.errors import RimclError
-from rimcl.stats.compute import SUMMARY_KEYS, budget_verdict, case_statistics, load_render
+from rimcl.stats.document import budget_verdict, case_statistics
+from rimcl.stats.render_file import load_render
+from rimcl.stats.summaries import SUMMARY_KEYS
 
 
 @pytest.fixture(scope="module")

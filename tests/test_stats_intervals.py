@@ -7,17 +7,12 @@ import numpy as np
 import pytest
 from synthetic_render import write_render_file
 
-from rimcl.stats.compute import (
-    CONVERGENCE_SEED,
-    TracerBootstrap,
-    case_statistics,
-    error_summary,
-    load_render,
-    not_converged,
-    pdf_peak,
-    run_stats,
-    weighted_quantiles,
-)
+from rimcl.stats.bootstrap import TracerBootstrap, weighted_quantiles
+from rimcl.stats.convergence import CONVERGENCE_SEED, not_converged
+from rimcl.stats.document import case_statistics, run_stats
+from rimcl.stats.peaks import pdf_peak
+from rimcl.stats.render_file import load_render
+from rimcl.stats.summaries import error_summary
 
 
 def rms_ratio(error, truth):

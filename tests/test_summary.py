@@ -5,7 +5,8 @@ from synthetic_budget import write_budget_file
 from synthetic_render import write_render_file
 
 from rimcl.scene.load import load_scene
-from rimcl.stats.compute import compute_stats, load_render
+from rimcl.stats.document import compute_stats
+from rimcl.stats.render_file import load_render
 from rimcl.study.summary import significant, summary_markdown, with_interval
 
 

@@ -9,7 +9,7 @@ from click.testing import CliRunner
 
 from rimcl.cli.main import cli
 from rimcl.fields.derivatives import gradient
-from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.field_reader import FieldFile
 from rimcl.fields.synth import BoussinesqSolver, default_reynolds, synthesize
 
 

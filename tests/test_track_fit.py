@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from rimcl.core.errors import RimclError
-from rimcl.fields.fieldfile import FieldFile, write_field
+from rimcl.fields.field_reader import FieldFile
+from rimcl.fields.field_writer import write_field
 from rimcl.ptv.track import (
     SheetVelocity,
     first_difference,

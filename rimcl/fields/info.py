@@ -11,7 +11,7 @@ import numpy as np
 
 from rimcl.core.memory import format_bytes
 from rimcl.fields.cases import CASE_FLUIDS, CASES, PAPER_DELTA_N_MAX
-from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.field_reader import FieldFile
 
 # bytes per voxel of a frame held as a Field: δn + ∇n as float4 (trilinear, texture),
 # and one float of B-spline coefficients (bspline3)

@@ -31,7 +31,8 @@ from rimcl.core.errors import RimclError, first_line
 from rimcl.core.memory import check_array_memory, check_import_memory
 from rimcl.core.provenance import check_output
 from rimcl.fields.derivatives import gradient as compute_gradient
-from rimcl.fields.fieldfile import check_hdf5_object, real_numbers, write_field
+from rimcl.fields.field_layout import check_hdf5_object, real_numbers
+from rimcl.fields.field_writer import write_field
 
 DNS_AXES = ("x", "y", "z")
 COORDINATES = {"x": "xcoor", "y": "ycoor", "z": "zcoor"}

@@ -5,7 +5,7 @@ import numpy as np
 from rimcl import __version__
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path, to_json
-from rimcl.fields.fieldfile import FieldFile
+from rimcl.fields.field_reader import FieldFile
 
 QUANTITIES = ("all", "density", "gradient", "velocity")
 # plane -> (axis normal to it, horizontal axis, vertical axis), as x-indices 0, 1, 2

@@ -1,7 +1,9 @@
 """Flow data: the field file, the built-in Boussinesq solver, JHTDB import, the sample.
 
-Submodules: :mod:`~rimcl.fields.cases` (Gladstone–Dale cases), :mod:`~rimcl.fields.fieldfile`
-(reader and writer), :mod:`~rimcl.fields.synth` (``rimcl field synth``),
+Submodules: :mod:`~rimcl.fields.cases` (Gladstone–Dale cases), the field file's
+:mod:`~rimcl.fields.field_layout`, :mod:`~rimcl.fields.field_reader`,
+:mod:`~rimcl.fields.field_writer` and :mod:`~rimcl.fields.field_loading`,
+:mod:`~rimcl.fields.synth` (``rimcl field synth``),
 :mod:`~rimcl.fields.jhtdb` (``rimcl field import``), :mod:`~rimcl.fields.plot`
 (``rimcl field show``).
 """

@@ -36,7 +36,7 @@ import scipy.fft
 from rimcl.core.errors import RimclError
 from rimcl.core.memory import check_synth_memory
 from rimcl.core.provenance import check_output
-from rimcl.fields.fieldfile import write_field
+from rimcl.fields.field_writer import write_field
 
 RHO_LIGHT = 1.0
 RHO_HEAVY = 1.105

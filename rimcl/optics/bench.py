@@ -175,7 +175,7 @@ def bench_cases(field_path=None, cases=DEFAULT_CASES, quick=False, pixels=PAPER_
     list of BenchCase
     """
     from rimcl.fields.cases import resolve_k_rho
-    from rimcl.fields.fieldfile import field_kind
+    from rimcl.fields.field_reader import field_kind
     from rimcl.optics.rays import fan_rays, scene_for
 
     if int(pixels) < 1:
@@ -201,7 +201,7 @@ def bench_cases(field_path=None, cases=DEFAULT_CASES, quick=False, pixels=PAPER_
 def _load(field_path, k_rho):
     """The field of a case: the file's frame 0, the shipped sample, or (no sample) a
     synthetic density with the sample's range."""
-    from rimcl.fields.fieldfile import load_field
+    from rimcl.fields.field_loading import load_field
 
     if field_path is not None:
         return load_field(field_path, 0, k_rho=k_rho)  # k_rho None: the file's own δn

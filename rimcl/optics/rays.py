@@ -80,7 +80,7 @@ def _csv_rays(path):
 
 
 def _h5_rays(path):
-    from rimcl.fields.fieldfile import check_hdf5_object
+    from rimcl.fields.field_layout import check_hdf5_object
 
     arrays = {}
     with h5py.File(path, "r") as data:

@@ -2,7 +2,7 @@
 
 Each figure is written as ``<name>.png``, ``<name>.pdf`` (versions in the file metadata)
 and ``<name>.json`` (every number drawn, with configuration and versions), as
-:mod:`rimcl.stats.figures` does, and with its panel helpers:
+:mod:`rimcl.stats.figures` does, and with its panel helpers (:mod:`rimcl.stats.figures_common`):
 
 - ``piv_vectors``: the vector map of the strongest case: true displacement, and the
   vectors measured through the field coloured by their refraction error (replaced vectors
@@ -24,14 +24,14 @@ from matplotlib.colors import LogNorm
 
 from rimcl.core.provenance import versions
 from rimcl.piv.study import velocity_table
-from rimcl.stats.figures import (
-    _case_colors,
-    _case_label,
-    _draw_pdf_series,
-    _finish_axes,
-    _new_figure,
-    _pdf_series,
-    _relative_errors,
+from rimcl.stats.figures_common import (
+    case_colors,
+    case_label,
+    draw_pdf_series,
+    finish_axes,
+    new_figure,
+    pdf_series,
+    relative_errors,
     save_figure,
 )
 
@@ -101,7 +101,7 @@ def _stride(shape):
 def _vectors(cases):
     """Truth and measured vectors of the strongest case (largest Δn_max)."""
     vectors, stats = cases[-1]
-    figure, axes = _new_figure(1, 2)
+    figure, axes = new_figure(1, 2)
     k = _stride(vectors["x"].shape)
     pick = (slice(None, None, k), slice(None, None, k))
     x, y = vectors["x"][pick], vectors["y"][pick]
@@ -152,7 +152,7 @@ def _vectors(cases):
             "colour_label": label,
         }
     figure.suptitle(
-        f"PIV vectors, {_case_label(stats)} (arrows: the longest true vector spans one "
+        f"PIV vectors, {case_label(stats)} (arrows: the longest true vector spans one "
         "window spacing)"
     )
     return figure, {"panels": panels}
@@ -164,7 +164,7 @@ def _error_maps(cases):
         ("optics", "optics part |ε_opt| (px)"),
         ("baseline", "baseline |d^ref − d_true| (px)"),
     )
-    figure, axes = _new_figure(len(rows), len(cases))
+    figure, axes = new_figure(len(rows), len(cases))
     panels = {}
     for row, (part, label) in enumerate(rows):
         maps = []
@@ -197,7 +197,7 @@ def _error_maps(cases):
             ax.set_aspect("equal")
             ax.set_xlabel("x (px)")
             ax.set_ylabel("y (px)")
-            ax.set_title(f"{part}, {_case_label(stats)}", fontsize=8, loc="right")
+            ax.set_title(f"{part}, {case_label(stats)}", fontsize=8, loc="right")
             panels[f"{part} {stats['name']}"] = {"magnitude_px": _listed(values)}
         if mesh is not None:  # one colour scale per row
             figure.colorbar(mesh, ax=axes[row, :].tolist(), label=label)
@@ -208,21 +208,21 @@ def _error_maps(cases):
 def _error_pdfs(cases):
     stats = [s for _, s in cases]
     tables = _tables(cases)
-    colors = _case_colors(len(cases))
-    figure, axes = _new_figure(2, 3)
+    colors = case_colors(len(cases))
+    figure, axes = new_figure(2, 3)
     panels = {}
     for ax, letter, component in (
         (axes[0, 0], "a", "3"),
         (axes[0, 1], "b", "2"),
         (axes[0, 2], "c", "magnitude"),
     ):
-        samples = [_relative_errors(t, "u", component, "meas", "ref") for t in tables]
-        series, edges = _pdf_series(samples, stats)
+        samples = [relative_errors(t, "u", component, "meas", "ref") for t in tables]
+        series, edges = pdf_series(samples, stats)
         if component == "magnitude":
             xlabel = "ε_|u| / |u|  (relative PIV refraction error of |u|)"
         else:
             xlabel = f"ε_u{component} / u{component}  (relative PIV refraction error)"
-        _draw_pdf_series(ax, series, edges, colors, xlabel)
+        draw_pdf_series(ax, series, edges, colors, xlabel)
         _letter(ax, letter)
         panels[letter] = {"quantity": xlabel, "bin_edges": edges.tolist(), "series": series}
     panels["d"] = _summary_against_g(
@@ -280,7 +280,7 @@ def draw_piv_figure(name, cases):
     data : dict
     """
     figure, data = _BUILDERS[name](cases)
-    _finish_axes(figure)
+    finish_axes(figure)
     return figure, data
 
 

@@ -11,7 +11,7 @@ Per vector of the final PIV grid (pixels; ``dx`` along ``x2``, ``dy`` along ``x3
 - **baseline**: the uniform-medium vector minus the window-averaged true displacement (the
   PIV method's own error: finite windows, gradients, lost pairs, sub-pixel fit).
 
-Statistics take the shapes of :mod:`rimcl.stats.compute` (``error_summary`` of the relative errors
+Statistics take the shapes of :mod:`rimcl.stats.summaries` (``error_summary`` of the relative errors
 of ``u2``, ``u3`` and ``|u|``, with velocities ``u = d · pixel_size / Δt``), over the vectors
 valid in both measurements whose window holds tracers. A vector replaced by the outlier
 test in either measurement is left out and counted.
@@ -33,8 +33,11 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path, stamp_h5, to_json
 from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair
-from rimcl.piv.images import PivConfig, PivImaging, run_piv_render, window_means
-from rimcl.stats.compute import angle_deg, error_summary
+from rimcl.piv.imaging_config import PivImaging
+from rimcl.piv.render import PivConfig, run_piv_render
+from rimcl.piv.truth import window_means
+from rimcl.stats.summaries import error_summary
+from rimcl.stats.tables import angle_deg
 
 SCHEMA = "piv_case"
 SCHEMA_VERSION = 1
@@ -70,7 +73,7 @@ class PivCaseReference:
 
     Attributes
     ----------
-    render : rimcl.piv.images.PivReference
+    render : rimcl.piv.render.PivReference
     settings : rimcl.piv.analysis.PivSettings
     uniform_vectors : rimcl.piv.analysis.PivResult
     """
@@ -86,7 +89,7 @@ class PivCase:
 
     Attributes
     ----------
-    render : rimcl.piv.images.PivRender
+    render : rimcl.piv.render.PivRender
     field_vectors, uniform_vectors : rimcl.piv.analysis.PivResult
     vectors : dict of str to ndarray
         :data:`VECTOR_COLUMNS`, each (rows, columns); displacements in pixels.
@@ -116,7 +119,7 @@ def optics_error(render, grid):
 
     Parameters
     ----------
-    render : rimcl.piv.images.PivRender
+    render : rimcl.piv.render.PivRender
     grid : rimcl.piv.analysis.WindowGrid
 
     Returns
@@ -137,7 +140,7 @@ def per_vector(render, field_vectors, uniform_vectors):
 
     Parameters
     ----------
-    render : rimcl.piv.images.PivRender
+    render : rimcl.piv.render.PivRender
     field_vectors, uniform_vectors : rimcl.piv.analysis.PivResult
         On the grid of the truth (same window and overlap).
 
@@ -185,7 +188,7 @@ def per_vector(render, field_vectors, uniform_vectors):
 
 
 def velocity_table(vectors, pixel_size, dt):
-    """Velocities of the used vectors in the column layout of :mod:`rimcl.stats.compute`.
+    """Velocities of the used vectors in the column layout of :mod:`rimcl.stats.render_file`.
 
     Returns
     -------
@@ -231,8 +234,8 @@ def window_blocks(shape, overlap):
 def vector_errors(table, measured, reference, ids=None):
     """Relative-error summaries of the velocity: ``u2``, ``u3``, magnitude and angle.
 
-    The PIV counterpart of the PTV velocity block of :mod:`rimcl.stats.compute` (same keys and
-    :func:`rimcl.stats.compute.error_summary` shapes); each vector is one sample.
+    The PIV counterpart of the PTV velocity block of :mod:`rimcl.stats.error_blocks` (same keys and
+    :func:`rimcl.stats.summaries.error_summary` shapes); each vector is one sample.
 
     Parameters
     ----------
@@ -272,13 +275,13 @@ def _max_abs(values):
 
 
 def case_statistics(render, vectors, settings):
-    """Statistics of one case, in the shapes of :func:`rimcl.stats.compute.case_statistics`.
+    """Statistics of one case, in the shapes of :func:`rimcl.stats.document.case_statistics`.
 
     Returns
     -------
     dict
         ``name, G, delta_n_max, length_L, pixel_size_over_L, dt, motion`` (the motion
-        model, :data:`rimcl.piv.images.MOTION_SHEET` or ``MOTION_3D``), ``n_tracers,
+        model, :data:`rimcl.piv.tracer_motion.MOTION_SHEET` or ``MOTION_3D``), ``n_tracers,
         n_vectors, n_used, n_excluded`` (by reason), ``velocity`` (refraction error ``u' - u^ref``:
         ``u2, u3, magnitude`` error summaries and ``angle_deg_median``), ``optics`` (the
         optics part, same shape), ``baseline`` (``{"velocity": ...}``, ``u^ref - u``),
@@ -362,10 +365,10 @@ def run_piv_case(
     case, k_rho :
         The case (``"C0"`` … ``"C4"``, ``"G=…"``, ``"dT=…"``, or ``k_rho``; 0 is a
         uniform medium).
-    piv : rimcl.piv.images.PivConfig, optional
+    piv : rimcl.piv.render.PivConfig, optional
         Imaging, timing and correlation (``piv.settings``).
     camera, integrator, fluid, run : optional
-        The :mod:`rimcl.scene.config` objects of :func:`rimcl.piv.images.run_piv_render`.
+        The :mod:`rimcl.scene.config` objects of :func:`rimcl.piv.render.run_piv_render`.
     reference : PivCaseReference, optional
         ``PivCase.reference`` of an earlier case of the same configuration.
 
@@ -469,7 +472,7 @@ def agreement_with_ptv(piv_stats, ptv_stats):
     piv_stats : dict
         :func:`case_statistics` of one case.
     ptv_stats : dict
-        The ``stats.json`` entry of the same case (:func:`rimcl.stats.compute.case_statistics`).
+        The ``stats.json`` entry of the same case (:func:`rimcl.stats.document.case_statistics`).
 
     Returns
     -------
@@ -514,7 +517,7 @@ def configs_from_scene(scene):
 
     Returns
     -------
-    piv : rimcl.piv.images.PivConfig
+    piv : rimcl.piv.render.PivConfig
     configs : dict
         ``camera``, ``integrator``, ``fluid``, ``run`` for :func:`run_piv_case`.
     """

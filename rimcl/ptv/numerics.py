@@ -16,7 +16,8 @@ import numpy as np
 
 from rimcl.fields.crop import StridedSource
 from rimcl.optics.trace import default_step
-from rimcl.ptv.measure import case_of, open_source, run_render
+from rimcl.ptv.field_source import case_of, open_source
+from rimcl.ptv.measure import run_render
 from rimcl.scene.config import MeasureConfig, TimeConfig, TracerConfig
 
 #: Tracers measured per run (the first of the study's tracers, same seed).

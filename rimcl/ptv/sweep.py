@@ -4,15 +4,15 @@ A study images ``F`` frames ``Δt`` apart; every ``m``-th of them is a measureme
 frames ``m Δt`` apart. The velocity and acceleration tables (the paper's differences and
 the sliding fit, DESIGN §6.6) are rebuilt from the positions of those frames alone, so a
 sweep costs no tracing: each multiple gives a ``stats.json`` document, and the figure of
-:func:`rimcl.stats.figures.write_dt_sweep_figure` shows at which Δt refraction rises above the
-baseline (finite differences, rendering and rounding).
+:func:`rimcl.stats.figures_dt_sweep.write_dt_sweep_figure` shows at which Δt refraction rises
+above the baseline (finite differences, rendering and rounding).
 """
 
 import dataclasses
 
 import numpy as np
 
-from rimcl.ptv.measure import kinematics_tables
+from rimcl.ptv.kinematics import kinematics_tables
 from rimcl.scene.config import TimeConfig
 
 #: Position kinds of a render file's ``tracers`` table (columns ``x2_<kind>``, ``x3_<kind>``).
@@ -28,7 +28,7 @@ def every_mth_frame(tables, multiple, time_config):
 
     Parameters
     ----------
-    tables : rimcl.stats.compute.RenderTables
+    tables : rimcl.stats.render_file.RenderTables
     multiple : int
         ``m >= 1``; frames ``0, m, 2m, …`` are kept, ``m Δt`` apart.
     time_config : rimcl.scene.config.TimeConfig
@@ -36,7 +36,7 @@ def every_mth_frame(tables, multiple, time_config):
 
     Returns
     -------
-    rimcl.stats.compute.RenderTables or None
+    rimcl.stats.render_file.RenderTables or None
         None when fewer than 2 frames are left.
     """
     tracers = tables.tracers
@@ -77,7 +77,7 @@ def sweep_stats(all_tables, multiples, scene_time, compute):
 
     Parameters
     ----------
-    all_tables : list of rimcl.stats.compute.RenderTables
+    all_tables : list of rimcl.stats.render_file.RenderTables
         The study's cases.
     multiples : sequence of int
         ``m`` values (``time.dt_multiples``).
@@ -85,7 +85,7 @@ def sweep_stats(all_tables, multiples, scene_time, compute):
         The scene's ``[time]`` section (fit window and order).
     compute : callable
         ``compute(list of RenderTables) -> stats document``
-        (:func:`rimcl.stats.compute.compute_stats`).
+        (:func:`rimcl.stats.document.compute_stats`).
 
     Returns
     -------

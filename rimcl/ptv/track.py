@@ -87,7 +87,7 @@ class SheetVelocity:
 
         Parameters
         ----------
-        source : rimcl.fields.fieldfile.FieldFile
+        source : rimcl.fields.field_reader.FieldFile
             Or any object with ``times``, ``origin``, ``spacing``, ``boundary`` and
             ``sheet_velocity(time, x1)`` like it.
         x_sheet : float

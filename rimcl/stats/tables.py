@@ -1,6 +1,6 @@
-"""Per-tracer samples of render tables, shared by :mod:`~rimcl.stats.compute` and figures.
+"""Per-tracer samples of render tables, shared by statistics and figures.
 
-A render file (:func:`rimcl.stats.compute.load_render`) holds one table per group (``tracers``,
+A render file (:func:`rimcl.stats.render_file.load_render`) holds one table per group (``tracers``,
 ``velocity``, ``acceleration``, ...), each a dict of equally long 1-D columns. The helpers
 here pick the rows that count (no excluding flag on the tracer) and turn them into the error
 samples both the statistics and the figures use, so the two never disagree on a number.

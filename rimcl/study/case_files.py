@@ -68,7 +68,7 @@ def check_case_file(path, scene, case):
     str or None
         One line saying why the file must be measured again.
     """
-    from rimcl.stats.compute import load_render
+    from rimcl.stats.render_file import load_render
 
     path = Path(path)
     try:

@@ -17,9 +17,9 @@ Workers
 Files (under the study directory)
     ``shards/<case>/<first>-<stop>.h5``: a ``rimcl render`` file of tracers
     ``first..stop-1``, written atomically by the worker that measured it, plus a group
-    ``reference`` holding that shard's :class:`rimcl.ptv.measure.Reference` (true tracks and
+    ``reference`` holding that shard's :class:`rimcl.ptv.render_file.Reference` (true tracks and
     reference images). When every shard of a case is on disk, the client merges them in
-    shard order (:func:`rimcl.ptv.measure.merge_results`) into ``cases/<case>.h5``
+    shard order (:func:`rimcl.ptv.render_file.merge_results`) into ``cases/<case>.h5``
     (atomically). A lost worker loses only the shard it was measuring (Dask runs it
     again elsewhere); a rerun, after a killed client too, measures only missing shards.
 
@@ -86,7 +86,7 @@ def _write_reference(group, reference):
 
 
 def _read_reference(group):
-    from rimcl.ptv.measure import Reference
+    from rimcl.ptv.render_file import Reference
 
     return Reference(
         key=json.loads(group.attrs["key"]),
@@ -119,7 +119,7 @@ def _stamp_of(path):
 
 
 def write_shard(path, result, stamp=""):
-    """Write one shard's :class:`rimcl.ptv.measure.RenderResult` and its reference, atomically.
+    """Write one shard's :class:`rimcl.ptv.render_file.RenderResult` and its reference, atomically.
 
     Parameters
     ----------
@@ -131,7 +131,7 @@ def write_shard(path, result, stamp=""):
     """
     import h5py
 
-    from rimcl.ptv.measure import write_render
+    from rimcl.ptv.render_file import write_render
 
     with atomic_path(path, overwrite=True) as tmp:
         write_render(tmp, result, overwrite=True)
@@ -141,7 +141,7 @@ def write_shard(path, result, stamp=""):
 
 
 def read_shard(path):
-    """A shard file (:func:`write_shard`) as a :class:`rimcl.ptv.measure.RenderResult`.
+    """A shard file (:func:`write_shard`) as a :class:`rimcl.ptv.render_file.RenderResult`.
 
     Returns
     -------
@@ -151,7 +151,7 @@ def read_shard(path):
     """
     import h5py
 
-    from rimcl.ptv.measure import RenderResult
+    from rimcl.ptv.render_file import RenderResult
 
     provenance = ("config", "versions", "device", "timings_s", "study_scene")
     try:
@@ -179,7 +179,8 @@ def read_shard(path):
         )
 
 
-#: The render file's tables of velocities and accelerations (rimcl.ptv.measure.kinematics_tables).
+#: The render file's tables of velocities and accelerations
+#: (rimcl.ptv.kinematics.kinematics_tables).
 KINEMATIC_TABLES = ("velocity", "acceleration", "velocity_fit", "acceleration_fit")
 
 
@@ -198,7 +199,7 @@ def merge_shards(path, shard_paths):
     """
     import h5py
 
-    from rimcl.ptv.measure import merge_results, write_render
+    from rimcl.ptv.render_file import merge_results, write_render
 
     merged = merge_results([read_shard(p) for p in shard_paths])
     with h5py.File(shard_paths[0], "r") as h5:
@@ -261,7 +262,7 @@ class _CachedFrames:
         return getattr(self._source, name)
 
     def field(self, frame=0, k_rho=None):
-        """:meth:`rimcl.fields.fieldfile.FieldFile.field`, kept for the next call."""
+        """:meth:`rimcl.fields.field_reader.FieldFile.field`, kept for the next call."""
         key = (int(frame), k_rho)
         if key not in self._frames:
             if any(k_rho != cached for _, cached in self._frames):
@@ -299,7 +300,7 @@ class RimclPlugin(WorkerPlugin):
     def setup(self, worker):
         """Choose the device, create its context, open the field file."""
         from rimcl.core.device import context_for
-        from rimcl.fields.fieldfile import FieldFile
+        from rimcl.fields.field_reader import FieldFile
         from rimcl.fields.sample import sample_path
 
         self.device = worker_device(worker.name, self.device_spec)

@@ -16,7 +16,7 @@ A study directory holds:
   (:mod:`rimcl.piv.study`), kept on a rerun when complete and of the same scene;
 - ``shards/<case>/<first>-<stop>.h5``: with a Dask scheduler (``run.scheduler``), the
   finished shards of tracers, merged into the case files (:mod:`rimcl.study.distributed`);
-- ``stats.json`` and ``figures/``: statistics and figures of all cases (:mod:`rimcl.stats.compute`,
+- ``stats.json`` and ``figures/``: statistics and figures of all cases (:mod:`rimcl.stats.document`,
   :mod:`rimcl.stats.figures`; PIV: a ``piv`` entry per case and ``figures/piv_*``);
 - ``summary.md``: the paper-style table, beside the paper's values for air and water.
   Written last, so its presence (newer than every case file) means the study is complete
@@ -209,7 +209,7 @@ def study_cases(scene):
     -------
     list of (str, str or None)
     """
-    from rimcl.fields.fieldfile import field_kind
+    from rimcl.fields.field_reader import field_kind
     from rimcl.fields.sample import sample_path
 
     if field_kind(scene["field"]["path"] or sample_path()) == "delta_n":
@@ -239,7 +239,7 @@ def _check_resources(scene):
     or whose sizes do not fit in memory."""
     from rimcl.core.device import select_device
     from rimcl.core.memory import check_render_request
-    from rimcl.fields.fieldfile import FieldFile
+    from rimcl.fields.field_reader import FieldFile
     from rimcl.fields.sample import sample_path
     from rimcl.optics.camera import Scene
 
@@ -334,7 +334,8 @@ def run_study(
         study already running there, an unusable field or device, a scene that cannot fit
         in memory, and every error of the measurement.
     """
-    from rimcl.ptv.measure import run_render, write_render
+    from rimcl.ptv.measure import run_render
+    from rimcl.ptv.render_file import write_render
 
     started = time.perf_counter()
     say = report or (lambda line: None)
@@ -451,7 +452,7 @@ def physical_equivalents(delta_n_max, scene):
 def _numerics(scene, case, out_dir, versions):
     """Run the Appendix A check, draw its figure, and return its numbers for stats.json."""
     from rimcl.ptv.numerics import numerical_convergence
-    from rimcl.stats.figures import write_numerics_figure
+    from rimcl.stats.figures_numerics import write_numerics_figure
 
     numerics = numerical_convergence(scene, case)
     write_numerics_figure(numerics, out_dir / "figures", versions)
@@ -486,8 +487,11 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
         The ``stats.json`` document.
     """
     from rimcl.ptv.sweep import sweep_stats
-    from rimcl.stats.compute import check_cases, compute_stats, load_render, write_json
-    from rimcl.stats.figures import dt_sweep_data, write_dt_sweep_figure, write_figures
+    from rimcl.stats.document import check_cases, compute_stats
+    from rimcl.stats.figures import write_figures
+    from rimcl.stats.figures_dt_sweep import dt_sweep_data, write_dt_sweep_figure
+    from rimcl.stats.render_file import load_render
+    from rimcl.stats.tables import write_json
 
     config = {"scene": scene, "study_dir": str(out_dir)}
     stats = {"cases": [], "config": config}

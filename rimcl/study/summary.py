@@ -4,8 +4,8 @@ The headline is the set of statistics that converge with the number of tracers:
 ``rms(ε)/rms(truth)``, the median and interquartile range of ``ε/truth``, and the same over
 the tracers whose truth is not small. The paper's mean and standard deviation of
 ``ε/truth`` follow, labelled as the paper's, with a mark on those that keep growing with
-the number of tracers (:func:`rimcl.stats.compute.not_converged`). Every value is printed with its
-bootstrap 95 % interval, and a statistic of an empty sample reads ``n/a``.
+the number of tracers (:func:`rimcl.stats.convergence.not_converged`). Every value is printed
+with its bootstrap 95 % interval, and a statistic of an empty sample reads ``n/a``.
 """
 
 import math

@@ -1,31 +1,10 @@
-"""The rimcl field file: an HDF5 file of flow frames on a uniform grid.
+"""Reading a rimcl field file (:class:`FieldFile`): the layout checked on opening, frames
+read on demand, interpolated in time and turned into refractive-index fields.
 
-Layout (``rimcl_schema = "field"``, ``schema_version = 1``), readable with plain h5py::
-
-    /                      attrs: rimcl_schema, schema_version, title, source, units, axes,
-                                  config, versions (JSON) and any extra provenance
-    /grid                  attrs: origin (3,), spacing (3,) along x1, x2, x3 (length units),
-                                  boundary ("clamp" or "periodic"; missing means "clamp")
-    /frames/0000           attrs: time (time units)
-        density            (n3, n2, n1) float32, dimensionless density
-        or delta_n         (n3, n2, n1) float32, n - n_ref, with attribute n_ref (float64)
-        density_gradient   (n3, n2, n1, 3) float32, optional, components along x1, x2, x3
-        velocity           (n3, n2, n1, 3) float32, optional, components along x1, x2, x3
-        or velocity_sheet  (n3, n2, 2) float32, optional, instead of velocity: the in-plane
-                           velocity (u2, u3) on the light-sheet plane x1 = const only, at
-                           the nodes (x3, x2), with attribute x1 (float64, length units)
-    /frames/0001 ...
-
-Frames are numbered from 0 in time order. A file holds either ``density`` (turned into a
-refractive index with a Gladstone–Dale product ``G``: ``δn = G (ρ - mean ρ)``,
-``n_ref = 1 + G mean ρ``) or ``delta_n`` directly, in every frame. A velocity, when
-stored, is in every frame, and either in full (``velocity``) or on one sheet plane
-(``velocity_sheet``, the same ``x1`` in every frame): the sheet plane is all that tracking
-tracers in that sheet needs, at 2/(3 n1) of the size, so a file can hold many frames.
+The layout is described in :mod:`rimcl.fields.field_layout`.
 """
 
 import functools
-import json
 import math
 from pathlib import Path
 
@@ -34,351 +13,29 @@ import numpy as np
 
 from rimcl.core.errors import RimclError, first_line
 from rimcl.core.memory import check_array_memory, check_field_memory
-from rimcl.core.provenance import atomic_path, stamp_h5
 from rimcl.fields.cases import resolve_k_rho
 from rimcl.fields.field import BOUNDARIES, Field
-
-SCHEMA = "field"
-SCHEMA_VERSION = 1
-#: Dataset name of the sheet-only velocity (see the module docstring).
-SHEET_VELOCITY = "velocity_sheet"
+from rimcl.fields.field_layout import (
+    REAL_KINDS,
+    SCHEMA,
+    SCHEMA_VERSION,
+    SHEET_VELOCITY,
+    check_hdf5_object,
+    check_sheet_x1,
+    plain_attr,
+    read_attr,
+    real_numbers,
+    text_attr,
+)
 
 # relative slack on times at the ends of the stored range (rounding of t0 + k dt)
 _TIME_SLACK = 1e-9
 
-
-def _frame_name(index):
-    return f"{index:04d}"
-
-
-def _as_frames(values, name, count=None, trailing=()):
-    """A list of float arrays, one per frame, checked for shape and finiteness."""
-    if values is None:
-        return None
-    frames = [np.asarray(v) for v in values]
-    if count is not None and len(frames) != count:
-        raise RimclError(f"{name} has {len(frames)} frames, expected {count}")
-    for k, frame in enumerate(frames):
-        if frame.ndim != 3 + len(trailing) or frame.shape[3:] != trailing:
-            want = "(n3, n2, n1" + "".join(f", {t}" for t in trailing) + ")"
-            raise RimclError(f"{name} frame {k} must have shape {want}, got {frame.shape}")
-        if not np.all(np.isfinite(frame)):
-            raise RimclError(f"{name} frame {k} holds NaN or infinite values")
-    return frames
-
-
-def _chunks(shape):
-    """Chunks of whole (n2, n1) planes, about 1 MiB each, so that gzip sees long runs."""
-    plane = int(np.prod(shape[1:])) * 4
-    depth = max(1, min(shape[0], (1 << 20) // max(plane, 1)))
-    return (depth, *shape[1:])
-
-
-def _attr_value(value):
-    """An HDF5-storable form of a provenance value (dicts and None become JSON text)."""
-    if value is None or (isinstance(value, (dict, list, tuple)) and not _numeric_list(value)):
-        return json.dumps(value)
-    return value
-
-
-def _numeric_list(value):
-    return isinstance(value, (list, tuple)) and all(
-        isinstance(v, (int, float, np.number)) for v in value
-    )
-
-
-def write_field(
-    path,
-    *,
-    density=None,
-    delta_n=None,
-    n_ref=None,
-    times,
-    origin,
-    spacing,
-    velocity=None,
-    velocity_sheet=None,
-    sheet_x1=None,
-    density_gradient=None,
-    boundary="clamp",
-    attrs=None,
-    config=None,
-    overwrite=False,
-):
-    """Write frames of a flow to a rimcl field file (atomically, stamped with provenance).
-
-    Parameters
-    ----------
-    path : str or Path
-        Output ``.h5`` file.
-    density : sequence of ndarray, each (n3, n2, n1), optional
-        Dimensionless density per frame. Exactly one of ``density`` and ``delta_n``.
-    delta_n : sequence of ndarray, each (n3, n2, n1), optional
-        ``n - n_ref`` per frame, with ``n_ref``.
-    n_ref : float or sequence of float, optional
-        Reference refractive index (one for all frames, or one per frame); only with
-        ``delta_n``.
-    times : sequence of float
-        Time of each frame (time units), strictly increasing.
-    origin, spacing : sequence of 3 float
-        Position of node ``(0, 0, 0)`` and the grid spacing along ``x1, x2, x3``.
-    velocity : sequence of ndarray, each (n3, n2, n1, 3), optional
-        Flow velocity, components along ``x1, x2, x3``.
-    velocity_sheet : sequence of ndarray, each (n3, n2, 2), optional
-        Instead of ``velocity``: the in-plane velocity ``(u2, u3)`` on the plane
-        ``x1 = sheet_x1`` only, at the nodes ``(x3, x2)``.
-    sheet_x1 : float, optional
-        The plane of ``velocity_sheet`` (length units): within the grid along ``x1``, or
-        anywhere for a periodic grid. Only with ``velocity_sheet``.
-    density_gradient : sequence of ndarray, each (n3, n2, n1, 3), optional
-        ``∇ρ`` (1/length) along ``x1, x2, x3``; only with ``density``. When absent,
-        readers compute it.
-    boundary : {"clamp", "periodic"}
-        ``periodic``: the grid holds one full period of a periodic box (endpoint excluded).
-    attrs : dict, optional
-        Extra root attributes (title, source, units, axes, ...). Dicts and None are stored
-        as JSON text.
-    config : dict, optional
-        The configuration that produced the data, recorded with the software versions
-        (default: ``attrs``).
-    overwrite : bool
-        Replace an existing file.
-
-    Returns
-    -------
-    pathlib.Path
-        The written file.
-    """
-    if (density is None) == (delta_n is None):
-        raise RimclError("give exactly one of density and delta_n")
-    if boundary not in BOUNDARIES:
-        raise RimclError(f"boundary must be one of {BOUNDARIES}, got {boundary!r}")
-    times = np.asarray(times, dtype=np.float64).reshape(-1)
-    if times.size == 0:
-        raise RimclError("a field file needs at least one frame")
-    if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
-        raise RimclError(f"times must be finite and strictly increasing, got {times.tolist()}")
-    count = times.size
-    kind = "density" if density is not None else "delta_n"
-    scalars = _as_frames(density if density is not None else delta_n, kind, count)
-    shape = scalars[0].shape
-    if any(s.shape != shape for s in scalars):
-        raise RimclError(f"all {kind} frames must have the same shape")
-    if kind == "delta_n":
-        if n_ref is None:
-            raise RimclError("delta_n needs n_ref")
-        refs = np.broadcast_to(np.asarray(n_ref, dtype=np.float64), (count,))
-        if not np.all(np.isfinite(refs)) or np.any(refs <= 0):
-            raise RimclError(f"n_ref must be positive, got {refs.tolist()}")
-    elif n_ref is not None:
-        raise RimclError("n_ref only goes with delta_n (density files get it from K*rho)")
-    if density_gradient is not None and kind != "density":
-        raise RimclError("density_gradient only goes with density")
-    vectors = {
-        "velocity": _as_frames(velocity, "velocity", count, (3,)),
-        "density_gradient": _as_frames(density_gradient, "density_gradient", count, (3,)),
-    }
-    for name, frames in vectors.items():
-        if frames is not None and any(f.shape[:3] != shape for f in frames):
-            raise RimclError(f"{name} frames must have shape {(*shape, 3)}")
-    sheet = _sheet_frames(velocity_sheet, sheet_x1, velocity, shape, count)
-    origin = np.asarray(origin, dtype=np.float64).reshape(-1)
-    spacing = np.asarray(spacing, dtype=np.float64).reshape(-1)
-    if origin.size != 3 or not np.all(np.isfinite(origin)):
-        raise RimclError(f"origin must be 3 finite numbers, got {origin.tolist()}")
-    if spacing.size != 3 or not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
-        raise RimclError(f"spacing must be 3 positive numbers, got {spacing.tolist()}")
-    if sheet is not None:
-        _check_sheet_x1(sheet_x1, origin[0], spacing[0], shape[2], boundary, "sheet_x1")
-    attrs = dict(attrs or {})
-    written = Path(path)
-    with atomic_path(written, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
-        h5.attrs["rimcl_schema"] = SCHEMA
-        h5.attrs["schema_version"] = SCHEMA_VERSION
-        for key, value in attrs.items():
-            h5.attrs[key] = _attr_value(value)
-        stamp_h5(h5, config if config is not None else attrs)
-        grid = h5.create_group("grid")
-        grid.attrs["origin"] = origin
-        grid.attrs["spacing"] = spacing
-        grid.attrs["boundary"] = boundary
-        frames_group = h5.create_group("frames")
-        for k in range(count):
-            group = frames_group.create_group(_frame_name(k))
-            group.attrs["time"] = times[k]
-            dataset = _write_array(group, kind, scalars[k])
-            if kind == "delta_n":
-                dataset.attrs["n_ref"] = float(refs[k])
-            for name, frames in vectors.items():
-                if frames is not None:
-                    _write_array(group, name, frames[k])
-            if sheet is not None:
-                _write_array(group, SHEET_VELOCITY, sheet[k]).attrs["x1"] = float(sheet_x1)
-    return written
-
-
-def _sheet_frames(velocity_sheet, sheet_x1, velocity, shape, count):
-    """The ``velocity_sheet`` frames of :func:`write_field`, checked, or None."""
-    if velocity_sheet is None:
-        if sheet_x1 is not None:
-            raise RimclError("sheet_x1 only goes with velocity_sheet")
-        return None
-    if velocity is not None:
-        raise RimclError("give either velocity or velocity_sheet, not both")
-    if sheet_x1 is None:
-        raise RimclError("velocity_sheet needs sheet_x1, the x1 of its plane")
-    frames = [np.asarray(v) for v in velocity_sheet]
-    if len(frames) != count:
-        raise RimclError(f"velocity_sheet has {len(frames)} frames, expected {count}")
-    want = (*shape[:2], 2)
-    for k, frame in enumerate(frames):
-        if frame.shape != want:
-            raise RimclError(f"velocity_sheet frame {k} must have shape {want}, got {frame.shape}")
-        if not np.all(np.isfinite(frame)):
-            raise RimclError(f"velocity_sheet frame {k} holds NaN or infinite values")
-    return frames
-
-
-def _check_sheet_x1(x1, origin1, spacing1, n1, boundary, what):
-    """Refuse a sheet plane ``x1`` that is not finite, or outside a clamped grid."""
-    try:
-        x1 = float(x1)
-    except (TypeError, ValueError):
-        raise RimclError(f"{what} must be a number, got {x1!r}") from None
-    hi = origin1 + (n1 - 1) * spacing1
-    if not math.isfinite(x1) or (boundary != "periodic" and not origin1 <= x1 <= hi):
-        raise RimclError(f"{what} = {x1:g} must lie in the field along x1 ({origin1:g} .. {hi:g})")
-
-
-def _write_array(group, name, values):
-    values = np.ascontiguousarray(values, dtype=np.float32)
-    return group.create_dataset(
-        name,
-        data=values,
-        chunks=_chunks(values.shape),
-        compression="gzip",
-        compression_opts=4,
-        shuffle=True,
-    )
-
-
-def _plain_attr(value):
-    if isinstance(value, bytes):
-        return value.decode("utf-8", "replace")
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
-#: Kinds of NumPy dtype a field array may hold: floating point and integers (booleans,
-#: complex numbers, strings and compound records are refused, not cast).
-_REAL_KINDS = "fiu"
 #: Largest grid coordinate: the float32 kernels square lengths (float32 overflows above
 #: 3.4e38), and rays through grids of spacing 1e20 already come out NaN.
 _LARGEST_COORDINATE = 1e18
 #: Arrays of a frame: name -> trailing shape after (n3, n2, n1).
 _FRAME_ARRAYS = {"density": (), "delta_n": (), "density_gradient": (3,), "velocity": (3,)}
-
-
-def check_hdf5_object(path, parent, name, kind):
-    """An object of an HDF5 file, checked to be what a reader expects, or None if absent.
-
-    Refuses links that leave the file (external links, datasets stored in external files,
-    virtual datasets), dangling links, objects of the wrong kind and objects the HDF5
-    library cannot open (a damaged file), each with one line naming the file and object.
-
-    Parameters
-    ----------
-    path : Path
-        The file, for messages.
-    parent : h5py.Group
-    name : str
-        Member of ``parent``.
-    kind : {"group", "dataset"}
-
-    Returns
-    -------
-    h5py.Group, h5py.Dataset or None
-    """
-    where = f"{path}: {parent.name.rstrip('/')}/{name}"
-    try:
-        link = parent.get(name, getlink=True)
-    except Exception as exc:  # h5py raises KeyError, RuntimeError or OSError by damage
-        raise RimclError(
-            f"{where} cannot be read ({first_line(exc)}); the file is damaged"
-        ) from None
-    if link is None:
-        return None
-    if isinstance(link, h5py.ExternalLink):
-        raise RimclError(
-            f"{where} is a link to {link.filename}:{link.path}; a file must hold its own data"
-        )
-    try:
-        found = parent.get(name)
-    except Exception as exc:
-        raise RimclError(
-            f"{where} cannot be opened ({first_line(exc)}); the file is damaged"
-        ) from None
-    if found is None:
-        target = link.path if isinstance(link, h5py.SoftLink) else "?"
-        raise RimclError(f"{where} is a link to {target}, which does not exist")
-    wanted = h5py.Group if kind == "group" else h5py.Dataset
-    if not isinstance(found, wanted):
-        other = "a group" if isinstance(found, h5py.Group) else "a dataset"
-        raise RimclError(f"{where} must be a {kind}, but it is {other}")
-    if kind == "dataset" and (found.external or found.is_virtual):
-        storage = "virtual" if found.is_virtual else "external"
-        raise RimclError(
-            f"{where} keeps its data in other files ({storage} storage); a file must hold "
-            "its own data"
-        )
-    return found
-
-
-def _attr(path, obj, name):
-    """An attribute's raw value, or None if absent; a damaged one is one line of error."""
-    try:
-        if name not in obj.attrs:
-            return None
-        return obj.attrs[name]
-    except Exception as exc:
-        raise RimclError(
-            f"{path}: attribute {name!r} of {obj.name} cannot be read ({first_line(exc)})"
-        ) from None
-
-
-def real_numbers(path, where, value, count=None):
-    """``value`` as a float64 array of real, finite numbers (``count`` of them if given).
-
-    Raises
-    ------
-    RimclError
-        Naming ``path`` and ``where`` for text, booleans, complex numbers, records, the
-        wrong count, NaN or infinity.
-    """
-    array = np.asarray(value)
-    if array.dtype.kind not in _REAL_KINDS:
-        wanted = "a real number" if count == 1 else "real numbers"
-        raise RimclError(f"{path}: {where} must be {wanted}, got {array.dtype} {value!r}")
-    array = array.astype(np.float64).reshape(-1)
-    if count is not None and array.size != count:
-        wanted = "one number" if count == 1 else f"{count} numbers"
-        raise RimclError(f"{path}: {where} must be {wanted}, got {array.size}")
-    if not np.all(np.isfinite(array)):
-        raise RimclError(f"{path}: {where} must be finite, got {array.tolist()}")
-    return array
-
-
-def _text_attr(path, obj, name, default):
-    value = _attr(path, obj, name)
-    if value is None:
-        return default
-    value = _plain_attr(value)
-    if not isinstance(value, str):
-        raise RimclError(f"{path}: attribute {name!r} of {obj.name} must be text, got {value!r}")
-    return value
 
 
 class FieldFile:
@@ -435,14 +92,14 @@ class FieldFile:
 
     def _read_layout(self):
         h5, path = self._h5, self.path
-        schema = _plain_attr(_attr(path, h5, "rimcl_schema"))
+        schema = plain_attr(read_attr(path, h5, "rimcl_schema"))
         if schema != SCHEMA:
             raise RimclError(
                 f"{path} is not a rimcl field file (rimcl_schema = {schema!r}); "
                 "import flow data with 'rimcl field import'"
             )
-        version = _attr(path, h5, "schema_version")
-        version = -1 if version is None else _plain_attr(version)
+        version = read_attr(path, h5, "schema_version")
+        version = -1 if version is None else plain_attr(version)
         if version != SCHEMA_VERSION:
             raise RimclError(f"{path}: field schema version {version!r} is not supported")
         grid = check_hdf5_object(path, h5, "grid", "group")
@@ -450,13 +107,13 @@ class FieldFile:
         if grid is None or frames is None:
             raise RimclError(f"{path}: a field file needs the groups 'grid' and 'frames'")
         for name in ("origin", "spacing"):
-            if _attr(path, grid, name) is None:
+            if read_attr(path, grid, name) is None:
                 raise RimclError(f"{path}: grid needs attributes origin and spacing")
-        self.origin = real_numbers(path, "grid origin", _attr(path, grid, "origin"), 3)
-        self.spacing = real_numbers(path, "grid spacing", _attr(path, grid, "spacing"), 3)
+        self.origin = real_numbers(path, "grid origin", read_attr(path, grid, "origin"), 3)
+        self.spacing = real_numbers(path, "grid spacing", read_attr(path, grid, "spacing"), 3)
         if not np.all(self.spacing > 0):
             raise RimclError(f"{path}: grid spacing must be positive, got {self.spacing.tolist()}")
-        self.boundary = _text_attr(path, grid, "boundary", "clamp")
+        self.boundary = text_attr(path, grid, "boundary", "clamp")
         if self.boundary not in BOUNDARIES:
             raise RimclError(f"{path}: unknown boundary {self.boundary!r}")
         names = sorted(frames)
@@ -469,12 +126,12 @@ class FieldFile:
         times, n_refs = [], []
         for name, group in zip(names, self._frames, strict=True):
             self._check_frame(name, group)
-            time = _attr(path, group, "time")
+            time = read_attr(path, group, "time")
             if time is None:
                 raise RimclError(f"{path}: frame {name} has no time attribute")
             times.append(real_numbers(path, f"time of frame {name}", time, 1)[0])
             if self.kind == "delta_n":
-                n_ref = _attr(path, group[self.kind], "n_ref")
+                n_ref = read_attr(path, group[self.kind], "n_ref")
                 if n_ref is None:
                     raise RimclError(f"{path}: delta_n of frame {name} has no n_ref attribute")
                 n_ref = real_numbers(path, f"n_ref of frame {name}", n_ref, 1)[0]
@@ -494,7 +151,7 @@ class FieldFile:
         self.n_refs = np.array(n_refs) if n_refs else None
         self.attrs = {}
         for key in h5.attrs:
-            self.attrs[key] = _plain_attr(_attr(path, h5, key))
+            self.attrs[key] = plain_attr(read_attr(path, h5, key))
 
     def _check_frame(self, name, group):
         """Check one frame's arrays (metadata only): kind, shapes and dtypes."""
@@ -523,7 +180,7 @@ class FieldFile:
                 raise RimclError(
                     f"{path}: frame {name} {array_name} must have shape {want}, got {dataset.shape}"
                 )
-            if dataset.dtype.kind not in _REAL_KINDS:
+            if dataset.dtype.kind not in REAL_KINDS:
                 raise RimclError(
                     f"{path}: frame {name} {array_name} must hold real numbers (float or "
                     f"integer), got {dataset.dtype}"
@@ -582,7 +239,7 @@ class FieldFile:
             )
         x1 = planes.pop()
         where = f"{self.path}: {SHEET_VELOCITY} x1"
-        _check_sheet_x1(x1, self.origin[0], self.spacing[0], self.shape[2], self.boundary, where)
+        check_sheet_x1(x1, self.origin[0], self.spacing[0], self.shape[2], self.boundary, where)
         return x1
 
     @property
@@ -904,70 +561,3 @@ def field_kind(path):
     """What a field file stores, ``"density"`` or ``"delta_n"`` (metadata only)."""
     with FieldFile(path) as ff:
         return ff.kind
-
-
-#: The Gladstone–Dale case of a density file when none is given (air).
-DEFAULT_CASE = "C1"
-
-
-def case_arguments(path=None, case=None, k_rho=None):
-    """The ``case`` and ``k_rho`` to use with a field file, from its metadata.
-
-    A file storing ``delta_n`` carries its own refractive index and takes neither (giving
-    one is refused); a density file takes the given case or ``K*rho``, else
-    :data:`DEFAULT_CASE`.
-
-    Parameters
-    ----------
-    path : str or Path, optional
-        Field file; None is the shipped sample.
-    case : str, optional
-    k_rho : float, optional
-
-    Returns
-    -------
-    case, k_rho : str or None, float or None
-    """
-    if path is None:
-        from rimcl.fields.sample import sample_path
-
-        path = sample_path()
-    if field_kind(path) == "delta_n":
-        if case is not None or k_rho is not None:
-            raise RimclError(
-                f"{path} stores delta_n (its own refractive index); a case or K*rho does not apply"
-            )
-        return None, None
-    if case is None and k_rho is None:
-        return DEFAULT_CASE, None
-    return case, k_rho
-
-
-def load_field(path=None, frame=0, *, k_rho=None, case=None, time=None):
-    """Load one frame (or a time between frames) of a field file as a :class:`rimcl.Field`.
-
-    Parameters
-    ----------
-    path : str or Path, optional
-        A rimcl field file; None loads the shipped sample (:func:`rimcl.flow.sample_path`).
-    frame : int
-        Stored frame (ignored when ``time`` is given).
-    k_rho : float, optional
-        Gladstone–Dale product ``G``; or give ``case``. Needed for density files.
-    case : str, optional
-        ``"C0"`` … ``"C4"`` (see :data:`rimcl.fields.cases.CASES`).
-    time : float, optional
-        Interpolate in time between stored frames (linear; cubic with 4+ frames).
-
-    Returns
-    -------
-    rimcl.Field
-    """
-    if path is None:
-        from rimcl.fields.sample import sample_path
-
-        path = sample_path()
-    with FieldFile(path) as ff:
-        if time is not None:
-            return ff.field_at(time, k_rho, case=case)
-        return ff.field(frame, k_rho, case=case)

@@ -1,0 +1,219 @@
+"""Writing a rimcl field file (:func:`write_field`), atomically and stamped with provenance.
+
+The layout is described in :mod:`rimcl.fields.field_layout`.
+"""
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from rimcl.core.errors import RimclError
+from rimcl.core.provenance import atomic_path, stamp_h5
+from rimcl.fields.field import BOUNDARIES
+from rimcl.fields.field_layout import SCHEMA, SCHEMA_VERSION, SHEET_VELOCITY, check_sheet_x1
+
+
+def _frame_name(index):
+    return f"{index:04d}"
+
+
+def _as_frames(values, name, count=None, trailing=()):
+    """A list of float arrays, one per frame, checked for shape and finiteness."""
+    if values is None:
+        return None
+    frames = [np.asarray(v) for v in values]
+    if count is not None and len(frames) != count:
+        raise RimclError(f"{name} has {len(frames)} frames, expected {count}")
+    for k, frame in enumerate(frames):
+        if frame.ndim != 3 + len(trailing) or frame.shape[3:] != trailing:
+            want = "(n3, n2, n1" + "".join(f", {t}" for t in trailing) + ")"
+            raise RimclError(f"{name} frame {k} must have shape {want}, got {frame.shape}")
+        if not np.all(np.isfinite(frame)):
+            raise RimclError(f"{name} frame {k} holds NaN or infinite values")
+    return frames
+
+
+def _chunks(shape):
+    """Chunks of whole (n2, n1) planes, about 1 MiB each, so that gzip sees long runs."""
+    plane = int(np.prod(shape[1:])) * 4
+    depth = max(1, min(shape[0], (1 << 20) // max(plane, 1)))
+    return (depth, *shape[1:])
+
+
+def _attr_value(value):
+    """An HDF5-storable form of a provenance value (dicts and None become JSON text)."""
+    if value is None or (isinstance(value, (dict, list, tuple)) and not _numeric_list(value)):
+        return json.dumps(value)
+    return value
+
+
+def _numeric_list(value):
+    return isinstance(value, (list, tuple)) and all(
+        isinstance(v, (int, float, np.number)) for v in value
+    )
+
+
+def write_field(
+    path,
+    *,
+    density=None,
+    delta_n=None,
+    n_ref=None,
+    times,
+    origin,
+    spacing,
+    velocity=None,
+    velocity_sheet=None,
+    sheet_x1=None,
+    density_gradient=None,
+    boundary="clamp",
+    attrs=None,
+    config=None,
+    overwrite=False,
+):
+    """Write frames of a flow to a rimcl field file (atomically, stamped with provenance).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output ``.h5`` file.
+    density : sequence of ndarray, each (n3, n2, n1), optional
+        Dimensionless density per frame. Exactly one of ``density`` and ``delta_n``.
+    delta_n : sequence of ndarray, each (n3, n2, n1), optional
+        ``n - n_ref`` per frame, with ``n_ref``.
+    n_ref : float or sequence of float, optional
+        Reference refractive index (one for all frames, or one per frame); only with
+        ``delta_n``.
+    times : sequence of float
+        Time of each frame (time units), strictly increasing.
+    origin, spacing : sequence of 3 float
+        Position of node ``(0, 0, 0)`` and the grid spacing along ``x1, x2, x3``.
+    velocity : sequence of ndarray, each (n3, n2, n1, 3), optional
+        Flow velocity, components along ``x1, x2, x3``.
+    velocity_sheet : sequence of ndarray, each (n3, n2, 2), optional
+        Instead of ``velocity``: the in-plane velocity ``(u2, u3)`` on the plane
+        ``x1 = sheet_x1`` only, at the nodes ``(x3, x2)``.
+    sheet_x1 : float, optional
+        The plane of ``velocity_sheet`` (length units): within the grid along ``x1``, or
+        anywhere for a periodic grid. Only with ``velocity_sheet``.
+    density_gradient : sequence of ndarray, each (n3, n2, n1, 3), optional
+        ``∇ρ`` (1/length) along ``x1, x2, x3``; only with ``density``. When absent,
+        readers compute it.
+    boundary : {"clamp", "periodic"}
+        ``periodic``: the grid holds one full period of a periodic box (endpoint excluded).
+    attrs : dict, optional
+        Extra root attributes (title, source, units, axes, ...). Dicts and None are stored
+        as JSON text.
+    config : dict, optional
+        The configuration that produced the data, recorded with the software versions
+        (default: ``attrs``).
+    overwrite : bool
+        Replace an existing file.
+
+    Returns
+    -------
+    pathlib.Path
+        The written file.
+    """
+    if (density is None) == (delta_n is None):
+        raise RimclError("give exactly one of density and delta_n")
+    if boundary not in BOUNDARIES:
+        raise RimclError(f"boundary must be one of {BOUNDARIES}, got {boundary!r}")
+    times = np.asarray(times, dtype=np.float64).reshape(-1)
+    if times.size == 0:
+        raise RimclError("a field file needs at least one frame")
+    if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+        raise RimclError(f"times must be finite and strictly increasing, got {times.tolist()}")
+    count = times.size
+    kind = "density" if density is not None else "delta_n"
+    scalars = _as_frames(density if density is not None else delta_n, kind, count)
+    shape = scalars[0].shape
+    if any(s.shape != shape for s in scalars):
+        raise RimclError(f"all {kind} frames must have the same shape")
+    if kind == "delta_n":
+        if n_ref is None:
+            raise RimclError("delta_n needs n_ref")
+        refs = np.broadcast_to(np.asarray(n_ref, dtype=np.float64), (count,))
+        if not np.all(np.isfinite(refs)) or np.any(refs <= 0):
+            raise RimclError(f"n_ref must be positive, got {refs.tolist()}")
+    elif n_ref is not None:
+        raise RimclError("n_ref only goes with delta_n (density files get it from K*rho)")
+    if density_gradient is not None and kind != "density":
+        raise RimclError("density_gradient only goes with density")
+    vectors = {
+        "velocity": _as_frames(velocity, "velocity", count, (3,)),
+        "density_gradient": _as_frames(density_gradient, "density_gradient", count, (3,)),
+    }
+    for name, frames in vectors.items():
+        if frames is not None and any(f.shape[:3] != shape for f in frames):
+            raise RimclError(f"{name} frames must have shape {(*shape, 3)}")
+    sheet = _sheet_frames(velocity_sheet, sheet_x1, velocity, shape, count)
+    origin = np.asarray(origin, dtype=np.float64).reshape(-1)
+    spacing = np.asarray(spacing, dtype=np.float64).reshape(-1)
+    if origin.size != 3 or not np.all(np.isfinite(origin)):
+        raise RimclError(f"origin must be 3 finite numbers, got {origin.tolist()}")
+    if spacing.size != 3 or not np.all(np.isfinite(spacing)) or np.any(spacing <= 0):
+        raise RimclError(f"spacing must be 3 positive numbers, got {spacing.tolist()}")
+    if sheet is not None:
+        check_sheet_x1(sheet_x1, origin[0], spacing[0], shape[2], boundary, "sheet_x1")
+    attrs = dict(attrs or {})
+    written = Path(path)
+    with atomic_path(written, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
+        h5.attrs["rimcl_schema"] = SCHEMA
+        h5.attrs["schema_version"] = SCHEMA_VERSION
+        for key, value in attrs.items():
+            h5.attrs[key] = _attr_value(value)
+        stamp_h5(h5, config if config is not None else attrs)
+        grid = h5.create_group("grid")
+        grid.attrs["origin"] = origin
+        grid.attrs["spacing"] = spacing
+        grid.attrs["boundary"] = boundary
+        frames_group = h5.create_group("frames")
+        for k in range(count):
+            group = frames_group.create_group(_frame_name(k))
+            group.attrs["time"] = times[k]
+            dataset = _write_array(group, kind, scalars[k])
+            if kind == "delta_n":
+                dataset.attrs["n_ref"] = float(refs[k])
+            for name, frames in vectors.items():
+                if frames is not None:
+                    _write_array(group, name, frames[k])
+            if sheet is not None:
+                _write_array(group, SHEET_VELOCITY, sheet[k]).attrs["x1"] = float(sheet_x1)
+    return written
+
+
+def _sheet_frames(velocity_sheet, sheet_x1, velocity, shape, count):
+    """The ``velocity_sheet`` frames of :func:`write_field`, checked, or None."""
+    if velocity_sheet is None:
+        if sheet_x1 is not None:
+            raise RimclError("sheet_x1 only goes with velocity_sheet")
+        return None
+    if velocity is not None:
+        raise RimclError("give either velocity or velocity_sheet, not both")
+    if sheet_x1 is None:
+        raise RimclError("velocity_sheet needs sheet_x1, the x1 of its plane")
+    frames = [np.asarray(v) for v in velocity_sheet]
+    if len(frames) != count:
+        raise RimclError(f"velocity_sheet has {len(frames)} frames, expected {count}")
+    want = (*shape[:2], 2)
+    for k, frame in enumerate(frames):
+        if frame.shape != want:
+            raise RimclError(f"velocity_sheet frame {k} must have shape {want}, got {frame.shape}")
+        if not np.all(np.isfinite(frame)):
+            raise RimclError(f"velocity_sheet frame {k} holds NaN or infinite values")
+    return frames
+
+
+def _write_array(group, name, values):
+    values = np.ascontiguousarray(values, dtype=np.float32)
+    return group.create_dataset(
+        name,
+        data=values,
+        chunks=_chunks(values.shape),
+        compression="gzip",
+        compression_opts=4,
+        shuffle=True,
+    )

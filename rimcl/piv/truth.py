@@ -1,0 +1,218 @@
+"""The ground truth of a PIV render, and its files.
+
+The true in-plane displacement of the tracers, weighted by ``I_A · I_B`` and averaged over
+each interrogation window (:func:`true_displacement`).
+
+Files (:func:`write_piv_render`, of a
+:class:`rimcl.piv.render.PivRender`): ``<prefix>_field_A.tif``, ``<prefix>_field_B.tif``,
+``<prefix>_uniform_A.tif``, ``<prefix>_uniform_B.tif`` (16-bit TIFF) and
+``<prefix>_truth.h5`` (``rimcl_schema = "piv_truth"``): per tracer, positions at both
+exposures (``x1, x2, x3``, length units, and ``col, row``, pixels), sheet intensities and
+the light-weighted mean image points of its collected rays per medium; the true
+displacement averaged over each interrogation window of the final PIV grid; the motion
+model (root attribute ``motion``), the configuration and versions.
+"""
+
+import math
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from rimcl.core.provenance import atomic_path, check_output, stamp_h5
+from rimcl.piv.analysis import write_tiff
+from rimcl.piv.imaging_config import sheet_intensity
+
+TRUTH_SCHEMA = "piv_truth"
+TRUTH_SCHEMA_VERSION = 1
+MEDIA = ("field", "uniform")
+
+
+def window_means(grid, col, row, values, weights):
+    """Weighted means of per-tracer values over each interrogation window.
+
+    A tracer belongs to window ``(r, c)`` when ``cols[c] <= col < cols[c] + size`` and
+    ``rows[r] <= row < rows[r] + size`` (overlapping windows share tracers).
+
+    Parameters
+    ----------
+    grid : rimcl.piv.analysis.WindowGrid
+    col, row : ndarray, shape (N,)
+        Tracer positions in pixels (columns, rows).
+    values : ndarray, shape (N, K)
+    weights : ndarray, shape (N,)
+        Non-negative; rows with a non-finite value or weight are left out.
+
+    Returns
+    -------
+    means : ndarray, float64, shape (rows, columns, K)
+        NaN for a window without weight.
+    total : ndarray, float64, shape (rows, columns)
+        Sum of the weights in each window.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    weights = np.asarray(weights, dtype=np.float64)
+    usable = np.isfinite(col) & np.isfinite(row) & np.isfinite(weights)
+    usable &= np.all(np.isfinite(values), axis=1)
+    col, row, values, weights = col[usable], row[usable], values[usable], weights[usable]
+    n_rows, n_cols = grid.shape
+    spacing = grid.spacing
+    sums = np.zeros((n_rows * n_cols, values.shape[1]))
+    total = np.zeros(n_rows * n_cols)
+    reach = math.ceil(grid.size / spacing)
+    base_c = np.floor((col - grid.cols[0]) / spacing).astype(np.int64)
+    base_r = np.floor((row - grid.rows[0]) / spacing).astype(np.int64)
+    # a tracer lies in at most ceil(size / spacing) windows along each axis, the ones whose
+    # corners are at most ``size`` before it
+    for back_r in range(reach):
+        r = base_r - back_r
+        in_r = (r >= 0) & (r < n_rows)
+        in_r &= row >= grid.rows[np.clip(r, 0, n_rows - 1)]
+        in_r &= row < grid.rows[np.clip(r, 0, n_rows - 1)] + grid.size
+        for back_c in range(reach):
+            c = base_c - back_c
+            inside = in_r & (c >= 0) & (c < n_cols)
+            inside &= col >= grid.cols[np.clip(c, 0, n_cols - 1)]
+            inside &= col < grid.cols[np.clip(c, 0, n_cols - 1)] + grid.size
+            flat = (r * n_cols + c)[inside]
+            total += np.bincount(flat, weights=weights[inside], minlength=total.size)
+            for k in range(values.shape[1]):
+                sums[:, k] += np.bincount(
+                    flat, weights=weights[inside] * values[inside, k], minlength=total.size
+                )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        means = np.where(total[:, None] > 0, sums / total[:, None], np.nan)
+    return means.reshape(n_rows, n_cols, -1), total.reshape(n_rows, n_cols)
+
+
+def pair_weights(positions, x_sheet, thickness):
+    """Weight of each tracer in a window average: ``I_A · I_B`` (its correlation share)."""
+    intensity = sheet_intensity(positions[..., 0], x_sheet, thickness)
+    return intensity[0] * intensity[1]
+
+
+def true_displacement(positions, renderer, grid, weights):
+    """The true in-plane displacement averaged over each interrogation window (pixels).
+
+    Tracers are assigned to windows by the midpoint of their two true image positions (a
+    deformed window measures the displacement at its centre, central-difference).
+
+    Parameters
+    ----------
+    positions : ndarray, shape (2, N, 3)
+    renderer : rimcl.imaging.render.Renderer
+        Maps ``(x2, x3)`` to pixels.
+    grid : rimcl.piv.analysis.WindowGrid
+        The final-pass windows.
+    weights : ndarray, shape (N,)
+
+    Returns
+    -------
+    dict
+        ``x, y`` (window centres, px, shape (rows, columns)), ``dx, dy`` (px; NaN for an
+        empty window), ``weight`` (sum of the weights) and ``tracers`` (count of tracers
+        with weight above 1e-3 whose midpoint is in the window).
+    """
+    pixels = renderer.to_pixels(positions[..., 1:])
+    middle = 0.5 * (pixels[0] + pixels[1])
+    motion = pixels[1] - pixels[0]
+    means, total = window_means(grid, middle[:, 0], middle[:, 1], motion, weights)
+    bright = (weights > 1e-3).astype(np.float64)
+    _, count = window_means(grid, middle[:, 0], middle[:, 1], np.zeros((len(bright), 1)), bright)
+    x, y = np.meshgrid(grid.x.astype(np.float64), grid.y.astype(np.float64))
+    return {
+        "x": x,
+        "y": y,
+        "dx": means[..., 0],
+        "dy": means[..., 1],
+        "weight": total,
+        "tracers": count.astype(np.int64),
+    }
+
+
+def output_paths(prefix):
+    """The files :func:`write_piv_render` writes for ``prefix``, by role.
+
+    Returns
+    -------
+    dict of str to Path
+        ``field_A``, ``field_B``, ``uniform_A``, ``uniform_B`` (TIFF) and ``truth`` (HDF5).
+    """
+    prefix = Path(prefix)
+    paths = {
+        f"{medium}_{frame}": prefix.with_name(f"{prefix.name}_{medium}_{frame}.tif")
+        for medium in MEDIA
+        for frame in "AB"
+    }
+    paths["truth"] = prefix.with_name(f"{prefix.name}_truth.h5")
+    return paths
+
+
+def check_outputs(prefix, overwrite=False):
+    """Refuse, before any work, outputs that exist (unless ``overwrite``) or cannot be written."""
+    for path in output_paths(prefix).values():
+        check_output(path, overwrite)
+
+
+def write_piv_render(prefix, result, overwrite=True):
+    """Write the four TIFF frames and the ground-truth HDF5 file of a :class:`PivRender`.
+
+    Parameters
+    ----------
+    prefix : str or Path
+        Path prefix; see :func:`output_paths`.
+    result : PivRender
+    overwrite : bool
+
+    Returns
+    -------
+    dict of str to Path
+    """
+    paths = output_paths(prefix)
+    check_outputs(prefix, overwrite)
+    frames = {"field": result.field, "uniform": result.uniform}
+    for medium, pair in frames.items():
+        for index, frame in enumerate("AB"):
+            write_tiff(paths[f"{medium}_{frame}"], pair.images[index], result.config, overwrite)
+    reference = result.reference
+    pixels = result.renderer.to_pixels(reference.positions[..., 1:])
+    thickness = result.imaging.thickness(result.scene, result.camera)
+    with atomic_path(paths["truth"], overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
+        h5.attrs["rimcl_schema"] = TRUTH_SCHEMA
+        h5.attrs["schema_version"] = TRUTH_SCHEMA_VERSION
+        h5.attrs["case"] = result.case
+        h5.attrs["k_rho"] = result.k_rho
+        h5.attrs["delta_n_max"] = result.delta_n_max
+        h5.attrs["dt"] = result.dt
+        h5.attrs["pixel_size"] = result.pixel_size
+        h5.attrs["motion"] = result.motion
+        h5.attrs["coordinates"] = (
+            "positions x1, x2, x3 in field length units; col, row in pixels: pixel (row i, "
+            "column j) covers x2 in fov_lo2 + [j, j+1) * pixel_size, x3 in fov_lo3 + [i, i+1) "
+            "* pixel_size; TIFF rows follow x3 (row 0 lowest)"
+        )
+        particles = h5.create_group("particles")
+        for index, frame in enumerate("AB"):
+            particles[f"position_{frame}"] = reference.positions[index]
+            particles[f"col_{frame}"] = pixels[index, :, 0]
+            particles[f"row_{frame}"] = pixels[index, :, 1]
+            particles[f"intensity_{frame}"] = sheet_intensity(
+                reference.positions[index, :, 0], result.scene.x_sheet, thickness
+            )
+            for medium, pair in frames.items():
+                particles[f"image_point_{medium}_{frame}"] = pair.optics[index]
+                particles[f"rays_collected_{medium}_{frame}"] = pair.collected[index]
+        truth = h5.create_group("truth")
+        for name, values in reference.truth.items():
+            truth[name] = values
+        truth.attrs["definition"] = (
+            "true in-plane displacement B - A (px), weighted by I_A * I_B, averaged over the "
+            "tracers whose midpoint image position lies in the final interrogation window"
+        )
+        for medium, pair in frames.items():
+            group = h5.create_group(f"rays_{medium}")
+            for name, value in pair.ray_counts.items():
+                group.attrs[name] = value
+            group.attrs["saturated_pixels"] = np.asarray(pair.saturated_pixels)
+        stamp_h5(h5, result.config, result.device)
+    return paths

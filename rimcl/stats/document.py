@@ -1,0 +1,294 @@
+"""Error statistics of synthetic PTV measurements (DESIGN §6.6, §7, §13).
+
+Input: the HDF5 tables written by ``rimcl render`` (one file per refractive-index case).
+Output: one ``stats.json`` document, whose shape is documented in the README:
+
+- position error ``ε_x = x' - x^ref`` (measured through the field minus measured through a
+  uniform field), summarised by the peak (mode) of the PDF of ``log10(|ε_x| / L)`` and the
+  median of ``|ε_x| / L``;
+- refraction errors of velocity and acceleration, ``ε_u = u' - u^ref`` and
+  ``ε_a = a' - a^ref``, relative to the true ``u`` and ``a``: mean (the paper's
+  *systematic* error), standard deviation (the paper's *random* error), and the robust
+  companions median, interquartile range and ``rms(ε) / rms(truth)``, also over the
+  tracers whose truth is not small (``|truth| ≥ CONDITION_FRACTION · rms(truth)``);
+- the finite-difference baseline ``u^ref - u`` and ``a^ref - a`` with the same summaries;
+- where the render file holds them, the same for the sliding-polynomial-fit tracks
+  (``velocity_fit``, ``acceleration_fit``) and the split of the error into ``optics`` (the
+  light-weighted mean of the traced ray image points, no pixels) and ``imaging`` (the rest:
+  renderer, threshold, centroid);
+- tracer image shape: peaks of the PDFs of ``ΔA / A`` and of the circularity ``C``.
+
+Every summary carries a bootstrap 95 % interval (:class:`TracerBootstrap`: tracers resampled
+with replacement, all rows of a tracer together), and the headline statistics are given
+against the number of tracers (``convergence``), with the ones that keep growing named.
+
+Relative errors are fractions (not percent). A statistic of an empty sample is ``None``
+(``null`` in JSON), never 0. A tracer with any bit of ``flags`` set in any of its rows (a
+position that is missing or doubtful) is left out of every statistic of its case and counted
+in ``n_excluded`` under each of its flag names; the bits of ``notes`` (what happened to the
+light of an image still measured as a camera would: a clipped peak, lost rays) are counted in
+``n_noted`` and the tracer is kept. Nothing is dropped without being counted.
+"""
+
+from pathlib import Path
+
+import numpy as np
+
+from rimcl.core.errors import RimclError
+from rimcl.core.provenance import versions
+from rimcl.stats.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, TracerBootstrap
+from rimcl.stats.convergence import convergence
+from rimcl.stats.error_blocks import (
+    budget_part,
+    kinematic_blocks,
+    refraction_errors,
+    vector_columns,
+    vector_errors,
+)
+from rimcl.stats.peaks import discrete_mode, pdf_peak
+from rimcl.stats.render_file import OPTICS_COLUMNS, load_render
+from rimcl.stats.summaries import CONDITION_FRACTION, finite_or_none
+from rimcl.stats.tables import NOTE_COLUMN, area_changes, flagged_tracers, rows_of, write_json
+
+
+def _area_change_peak(tracers):
+    changes = area_changes(tracers)
+    area_ref = tracers["area_ref"][tracers["area_ref"] > 0]
+    if changes.size == 0:
+        return None
+    return discrete_mode(changes, 1.0 / float(np.median(area_ref)))
+
+
+#: |ΔA/A| (90th percentile) above which tracer images count as reshaped in a verdict.
+IMAGE_RESHAPED = 0.25
+
+
+def budget_verdict(case):
+    """Which part of the velocity error dominates a case: optics, imaging or the baseline.
+
+    Parameters
+    ----------
+    case : dict
+        A ``stats.json`` case with ``optics`` and ``imaging`` blocks.
+
+    Returns
+    -------
+    dict or None
+        ``quantity`` (the statistic compared: ``velocity.<u3>.rms_normalized``), its
+        ``optics``, ``imaging``, ``total`` and ``baseline`` values, ``dominant`` (the
+        largest of optics, imaging, baseline) and ``text``, one line for a reader.
+        ``None`` without the blocks or the numbers.
+    """
+    if "optics" not in case or "velocity" not in case["optics"]:
+        return None
+    parts = {
+        "optics": case["optics"]["velocity"]["u3"]["rms_normalized"],
+        "imaging": case["imaging"]["velocity"]["u3"]["rms_normalized"],
+        "total": case["velocity"]["u3"]["rms_normalized"],
+        "baseline": case["baseline"]["velocity"]["u3"]["rms_normalized"],
+    }
+    if any(value is None for value in parts.values()):
+        return None
+    contenders = {name: parts[name] for name in ("optics", "imaging", "baseline")}
+    dominant = max(contenders, key=contenders.get)
+    words = [f"{case['name']}: {dominant} dominates rms(ε_u3)/rms(u3)"]
+    optics, imaging = parts["optics"], parts["imaging"]
+    if optics > 0 and imaging > 0:
+        larger, smaller = ("imaging", "optics") if imaging >= optics else ("optics", "imaging")
+        words.append(f"{larger} {max(optics, imaging) / min(optics, imaging):.2g}× {smaller}")
+    if parts["total"] > 0:
+        words.append(f"baseline {parts['baseline'] / parts['total']:.2g}× refraction")
+    area = case.get("area_change_p90")
+    if dominant == "imaging" and area is not None:
+        # the typical image may keep its size (the peak of ΔA/A at 0) while a tenth changes
+        words.append(
+            f"tracer images change size (|ΔA/A| 90th percentile {area:.2g}): the ray cloud "
+            "reshapes the image and the threshold cuts it"
+            if area > IMAGE_RESHAPED
+            else f"images keep their size (|ΔA/A| 90th percentile {area:.2g}): rendering and "
+            "rounding noise"
+        )
+    return {
+        "quantity": "velocity.u3.rms_normalized",
+        **parts,
+        "dominant": dominant,
+        "text": "; ".join(words),
+    }
+
+
+def case_statistics(tables):
+    """The ``stats.json`` entry of one case.
+
+    Parameters
+    ----------
+    tables : RenderTables
+
+    Returns
+    -------
+    dict
+        Keys documented in the README (``name``, ``G``, ``delta_n_max``, ``n_tracers``,
+        ``n_used``, ``n_excluded``, ``position_error_*`` with ``*_ci95``, ``velocity``,
+        ``acceleration`` (and ``velocity_fit``, ``acceleration_fit`` where the file has
+        them), ``baseline``, ``optics`` and ``imaging`` (where the file has the optics
+        columns), ``budget_verdict``, ``convergence``, ``area_change_peak``,
+        ``circularity_peak``, ``rays``).
+    """
+    excluded_ids, excluded_counts = flagged_tracers(tables)
+    noted_ids, noted_counts = flagged_tracers(tables, NOTE_COLUMN)
+    all_ids = np.unique(tables.tracers["id"].astype(np.int64))
+    kept = np.setdiff1d(all_ids, excluded_ids)
+    bootstrap = TracerBootstrap(kept)
+    tracers = rows_of(tables.tracers, kept)
+    blocks = kinematic_blocks(tables, kept)
+    rays_total = int(np.sum(tables.tracers["n_rays"]))
+    case = {
+        "name": tables.case,
+        "G": finite_or_none(tables.k_rho),
+        "delta_n_max": tables.delta_n_max,
+        "length_L": tables.length,
+        "pixel_size_over_L": tables.pixel_size / tables.length,
+        "dt": tables.dt,
+        "n_tracers": int(all_ids.size),
+        "n_used": int(kept.size),
+        "n_excluded": excluded_counts,
+        "n_noted": noted_counts,
+        "n_used_noted": int(np.setdiff1d(noted_ids, excluded_ids).size),
+    }
+    refraction = refraction_errors(tables, tracers, blocks, bootstrap)
+    case.update(refraction)
+    case["baseline"] = {
+        group: vector_errors(
+            table,
+            symbol,
+            vector_columns(table, symbol, "ref"),
+            vector_columns(table, symbol, "true"),
+            bootstrap,
+        )
+        for group, (symbol, table) in blocks.items()
+    }
+    if all(name in tracers for name in OPTICS_COLUMNS["x"]):
+        for part in ("optics", "imaging"):
+            case[part] = budget_part(
+                tracers, blocks, tables.length, tables.pixel_size, bootstrap, part
+            )
+    case["area_change_peak"] = _area_change_peak(tracers)
+    changes = area_changes(tracers)
+    changes = np.abs(changes[np.isfinite(changes)])
+    case["area_change_p90"] = float(np.percentile(changes, 90)) if changes.size else None
+    case["circularity_peak"] = pdf_peak(tracers["circularity_meas"])
+    case["convergence"] = convergence(tables, kept, blocks, refraction)
+    case["budget_verdict"] = budget_verdict(case)
+    case["rays"] = {
+        "n_rays": rays_total,
+        "n_rays_ok": int(np.sum(tables.tracers["n_rays_ok"])),
+        "status_counts": tables.ray_counts["measured"],
+        "reference_status_counts": tables.ray_counts["reference"],
+    }
+    return case
+
+
+def check_cases(all_tables):
+    """Sort render tables by Δn_max and refuse two files of the same case name."""
+    if not all_tables:
+        raise RimclError("no render files given")
+    names = [tables.case for tables in all_tables]
+    duplicates = sorted({name for name in names if names.count(name) > 1})
+    if duplicates:
+        raise RimclError(f"more than one render file for case {', '.join(duplicates)}")
+    # by index difference: G cases of one field in order of G, fluid cases in order of ΔT
+    return sorted(all_tables, key=lambda tables: tables.delta_n_max)
+
+
+METHODS = {
+    "position_error_peak": "mode of a Gaussian KDE (Scott) of log10(|x_meas - x_ref| / L)",
+    "excluded": "a tracer with any flag in any row is left out of its case",
+    "ci95": (
+        f"bootstrap percentile interval (2.5 %, 97.5 %) of {BOOTSTRAP_RESAMPLES} resamples "
+        f"of the tracers (with replacement, all rows of a tracer together, seed "
+        f"{BOOTSTRAP_SEED}); the position peak's resamples keep the full sample's bandwidth"
+    ),
+    "conditioned": (
+        f"rows with |truth| >= {CONDITION_FRACTION} rms(truth) (rms over the component's "
+        "usable rows of the case)"
+    ),
+    "convergence": (
+        "nested random subsamples of N/16 ... N tracers; not converged: the magnitude grows "
+        "over N/4 < N/2 < N and the value at N lies outside the 95 % interval at N/4"
+    ),
+    "area_change_peak": "centre of the fullest bin of a histogram of whole-pixel steps",
+    "area_change_p90": "90th percentile of |ΔA/A| over the rows with a reference image",
+}
+
+
+def compute_stats(all_tables, config=None):
+    """The ``stats.json`` document of several cases.
+
+    Parameters
+    ----------
+    all_tables : list of RenderTables
+        One per case; sorted by ``G`` in the output.
+    config : dict, optional
+        Extra configuration to record (the study's scene, for instance).
+
+    Returns
+    -------
+    dict
+        ``{"cases": [...], "config": {...}, "versions": {...}}``.
+    """
+    all_tables = check_cases(all_tables)
+    record = {
+        "inputs": [
+            {"path": str(tables.path), "case": tables.case, **tables.provenance}
+            for tables in all_tables
+        ],
+        **METHODS,
+    }
+    if config:
+        record.update(config)
+    return {
+        "cases": [case_statistics(tables) for tables in all_tables],
+        "config": record,
+        "versions": versions(),
+    }
+
+
+def run_stats(paths, out_dir, overwrite=False, figures=True, config=None):
+    """Statistics (and figures) of several ``rimcl render`` files: what ``rimcl stats`` does.
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        Render files, one per case.
+    out_dir : str or Path
+        Output directory (created if missing): ``stats.json`` and, with ``figures``, the
+        figures with their data (see :mod:`rimcl.stats.figures`).
+    overwrite : bool
+        Replace existing outputs; otherwise an existing ``stats.json`` is an error.
+    figures : bool
+        Also draw the figures.
+    config : dict, optional
+        Extra configuration recorded in every output.
+
+    Returns
+    -------
+    dict
+        The ``stats.json`` document.
+    """
+    out_dir = Path(out_dir)
+    all_tables = check_cases([load_render(path) for path in paths])
+    stats_path = out_dir / "stats.json"
+    for existing in (stats_path, out_dir / "figures") if figures else (stats_path,):
+        if existing.exists() and not overwrite:
+            raise RimclError(f"{existing} exists (use --overwrite to replace it)")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RimclError(f"cannot create output directory {out_dir}: {exc}") from None
+    stats = compute_stats(all_tables, config=config)
+    if figures:
+        # figures draw what the statistics computed; they never import this module
+        from rimcl.stats.figures import write_figures
+
+        write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
+    write_json(stats_path, stats, overwrite=True)
+    return stats

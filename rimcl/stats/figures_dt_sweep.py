@@ -1,0 +1,219 @@
+"""The Δt sweep figure: refraction and baseline errors of several studies against the time
+step, with the Δt at which refraction dominates listed per case.
+"""
+
+import textwrap
+from pathlib import Path
+
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+
+from rimcl.stats.figures_common import (
+    KINEMATIC_BLOCKS,
+    PANEL_SIZE,
+    case_colors,
+    dig,
+    errorbars,
+    figure_title,
+    finish_axes,
+    panel_title,
+    save_figure,
+    ticks_at,
+)
+
+#: Quantities of the Δt sweep: (stats key, component).
+DT_SWEEP_QUANTITIES = (
+    ("velocity", "u3"),
+    ("acceleration", "a3"),
+    ("velocity_fit", "u3"),
+    ("acceleration_fit", "a3"),
+)
+
+
+def dt_sweep_data(stats_by_dt):
+    """Refraction and baseline ``rms(ε)/rms(truth)`` of each case against Δt.
+
+    Parameters
+    ----------
+    stats_by_dt : dict of float to dict
+        The ``stats.json`` document of one study per time step Δt (field time units).
+
+    Returns
+    -------
+    dict
+        ``dt`` (sorted), and per case name and quantity (``velocity``, ``acceleration``,
+        and the ``_fit`` ones where every study has them) the lists ``refraction``,
+        ``refraction_ci95``, ``baseline``, ``baseline_ci95`` (one entry per Δt, ``None``
+        where missing), ``dominates`` (refraction above baseline at that Δt, ``None`` where
+        unknown), ``wholly_above`` (the refraction interval wholly above the baseline's),
+        ``refraction_dominates_dt`` (the Δt values where it dominates).
+    """
+    dts = sorted(stats_by_dt)
+    documents = [stats_by_dt[dt] for dt in dts]
+    names = []
+    for document in documents:
+        names += [case["name"] for case in document["cases"] if case["name"] not in names]
+    quantities = [
+        (group, component)
+        for group, component in DT_SWEEP_QUANTITIES
+        if all(any(group in case for case in doc["cases"]) for doc in documents)
+    ]
+    cases = {}
+    for name in names:
+        by_quantity = {}
+        for group, component in quantities:
+            entry = {
+                key: [] for key in ("refraction", "refraction_ci95", "baseline", "baseline_ci95")
+            }
+            for document in documents:
+                case = next((c for c in document["cases"] if c["name"] == name), {})
+                for kind, summary in (
+                    ("refraction", dig(case, group, component)),
+                    ("baseline", dig(case, "baseline", group, component)),
+                ):
+                    entry[kind].append(None if summary is None else summary["rms_normalized"])
+                    entry[f"{kind}_ci95"].append(
+                        None if summary is None else summary["ci95"]["rms_normalized"]
+                    )
+            entry["dominates"] = [
+                None if r is None or b is None else r > b
+                for r, b in zip(entry["refraction"], entry["baseline"], strict=True)
+            ]
+            entry["wholly_above"] = [
+                None if r is None or b is None else r[0] > b[1]
+                for r, b in zip(entry["refraction_ci95"], entry["baseline_ci95"], strict=True)
+            ]
+            entry["refraction_dominates_dt"] = [
+                dt for dt, flag in zip(dts, entry["dominates"], strict=True) if flag
+            ]
+            by_quantity[f"{group}.{component}"] = entry
+        cases[name] = by_quantity
+    return {"dt": dts, "cases": cases, "quantities": [f"{g}.{c}" for g, c in quantities]}
+
+
+def draw_dt_sweep(stats_by_dt):
+    """The Δt sweep figure: refraction (solid) and baseline (dashed) against Δt per case.
+
+    Below the panels, one line per case lists the Δt at which refraction exceeds the
+    baseline, for each quantity.
+
+    Returns
+    -------
+    figure : matplotlib.figure.Figure
+    data : dict
+        ``{"panels": dt_sweep_data(...)}``.
+    """
+    data = dt_sweep_data(stats_by_dt)
+    quantities = data["quantities"]
+    names = list(data["cases"])
+    count = max(len(quantities), 1)
+    cols = min(count, 2)
+    rows = -(-count // cols)
+    characters = int(PANEL_SIZE[0] * cols * 72 / (0.55 * 7))
+    lines = []
+    for name in names:
+        parts = []
+        for quantity in quantities:
+            dominated = data["cases"][name][quantity]["refraction_dominates_dt"]
+            listed = ", ".join(f"{dt:.3g}" for dt in dominated) if dominated else "none"
+            parts.append(f"{quantity}: {listed}")
+        line = f"{name}: refraction above baseline at Δt = " + "; ".join(parts)
+        lines += textwrap.wrap(line, characters, subsequent_indent="    ")
+    text_height = 0.3 + 0.17 * len(lines)
+    figure = Figure(
+        figsize=(PANEL_SIZE[0] * cols + 2.0, PANEL_SIZE[1] * rows + text_height),
+        dpi=120,
+        layout="constrained",
+    )
+    grid = figure.add_gridspec(rows + 1, cols, height_ratios=[PANEL_SIZE[1]] * rows + [text_height])
+    colors = case_colors(len(names))
+    for index, quantity in enumerate(quantities):
+        ax = figure.add_subplot(grid[index // cols, index % cols])
+        for name, color in zip(names, colors, strict=True):
+            entry = data["cases"][name][quantity]
+            for kind, marker in (("refraction", "o"), ("baseline", "s")):
+                points = [
+                    (dt, v, ci)
+                    for dt, v, ci in zip(
+                        data["dt"], entry[kind], entry[f"{kind}_ci95"], strict=True
+                    )
+                    if v is not None and v > 0
+                ]
+                if not points:
+                    continue
+                dts, values, intervals = zip(*points, strict=True)
+                ax.plot(dts, values, "-" if kind == "refraction" else "--", color=color, lw=1)
+                errorbars(
+                    ax,
+                    dts,
+                    values,
+                    intervals,
+                    True,
+                    color=color,
+                    marker=marker,
+                    ms=4,
+                    mfc=color if kind == "refraction" else "white",
+                )
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ticks_at(ax.xaxis, data["dt"])
+        ax.set_xlabel("time step Δt (field time units)")
+        ax.set_ylabel("rms(ε) / rms(truth)")
+        ax.grid(True, which="major", alpha=0.3)
+        group, component = quantity.split(".")
+        description = dict((g, d) for g, _, d in KINEMATIC_BLOCKS)[group]
+        panel_title(ax, chr(ord("a") + index), f"{description}, {component}")
+    handles = [
+        Line2D([], [], color=c, marker="o", label=n) for n, c in zip(names, colors, strict=True)
+    ]
+    handles += [
+        Line2D([], [], color="k", marker="o", label="refraction (u' − u^ref)"),
+        Line2D(
+            [], [], color="k", marker="s", mfc="white", linestyle="--", label="baseline (u^ref − u)"
+        ),
+    ]
+    figure.legend(handles=handles, loc="outside right upper", fontsize=7)
+    text_ax = figure.add_subplot(grid[rows, :])
+    text_ax.set_axis_off()
+    text_ax.text(
+        0.0,
+        1.0,
+        "\n".join(lines),
+        va="top",
+        ha="left",
+        fontsize=7,
+        transform=text_ax.transAxes,
+    )
+    figure_title(
+        figure,
+        "Refraction against baseline with the time step (bars: bootstrap 95 % intervals)",
+        fontsize=9,
+    )
+    finish_axes(figure)
+    return figure, {"panels": data}
+
+
+def write_dt_sweep_figure(stats_by_dt, out_dir, overwrite=True, name="dt_sweep"):
+    """Write the Δt sweep figure (``<name>.png``, ``.pdf``, ``.json``).
+
+    Parameters
+    ----------
+    stats_by_dt : dict of float to dict
+        The ``stats.json`` document of one study per Δt.
+    out_dir : str or Path
+        Created if missing.
+    overwrite : bool
+    name : str
+
+    Returns
+    -------
+    data : dict
+        :func:`dt_sweep_data` (with ``refraction_dominates_dt`` per case and quantity).
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    figure, data = draw_dt_sweep(stats_by_dt)
+    first = stats_by_dt[min(stats_by_dt)]
+    record = {"config": {"dt_sweep": sorted(stats_by_dt)}, "versions": first["versions"]}
+    save_figure(figure, name, data, record, out_dir, overwrite)
+    return data["panels"]

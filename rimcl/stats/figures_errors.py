@@ -1,0 +1,322 @@
+"""Figures of the measurement errors: ``position_error`` (PDFs of |ε_x| / L, their peak and
+median against G), ``velocity_error`` and ``acceleration_error`` (PDFs of the relative errors,
+the direction error, the paper's and the robust statistics against G) and ``maps`` (u3 and a3:
+truth, uniform medium, an air-like and a water-like case).
+"""
+
+import numpy as np
+from matplotlib.lines import Line2D
+
+from rimcl.stats.figures_common import (
+    case_colors,
+    case_label,
+    draw_pdf_series,
+    figure_title,
+    kinematic_rows,
+    new_figure,
+    panel_title,
+    pdf_series,
+    relative_errors,
+    statistic_against_g,
+)
+from rimcl.stats.tables import (
+    angle_deg,
+    density_estimate,
+    first_frame_rows,
+    kept_rows,
+    position_errors,
+)
+
+
+def draw_position_error(all_tables, cases):
+    figure, axes = new_figure(1, 2)
+    ax_pdf, ax_peak = axes[0]
+    colors = case_colors(len(cases))
+    series = []
+    for tables, case, color in zip(all_tables, cases, colors, strict=True):
+        errors = position_errors(kept_rows(tables, tables.tracers), tables.length)
+        grid, density = density_estimate(errors, log=True)
+        entry = {
+            "label": case_label(case),
+            "x_over_L": grid.tolist(),
+            "pdf_log10": density.tolist(),
+            "peak_over_L": case["position_error_peak_over_L"],
+            "n_zero": int(np.count_nonzero(errors == 0)),
+            "n": int(errors.size),
+        }
+        series.append(entry)
+        if grid.size < 2:
+            note = {0: ": no tracer used", 1: ""}.get(grid.size, "")
+            if grid.size == 0 and errors.size:
+                note = ": |ε_x| = 0 exactly"
+            ax_pdf.plot([], [], color=color, label=case_label(case) + note)
+            continue
+        ax_pdf.plot(grid, density, color=color, label=case_label(case))
+        peak = entry["peak_over_L"]
+        ax_pdf.plot(
+            peak, np.interp(np.log10(peak), np.log10(grid), density), "o", color=color, mec="k"
+        )
+    ax_pdf.set_xscale("log")
+    ax_pdf.set_xlabel("position error |ε_x| / L")
+    ax_pdf.set_ylabel("PDF of log10(|ε_x| / L)")
+    ax_pdf.grid(True, which="major", alpha=0.3)
+    ax_pdf.legend(fontsize=6, title="dots: PDF peaks", title_fontsize=6)
+    panel_title(ax_pdf, "a", "PDF of the position error, per case")
+
+    def position(key):
+        return lambda case: (
+            None
+            if case[key] is None
+            else {"value": case[key], "ci95": {"value": case[f"{key}_ci95"]}}
+        )
+
+    positive = [c for c in cases if c["G"] > 0]
+    data = statistic_against_g(
+        ax_peak,
+        positive,
+        [
+            (
+                "PDF peak of |ε_x| / L",
+                position("position_error_peak_over_L"),
+                {"marker": "o", "color": "k"},
+            ),
+            (
+                "median of |ε_x| / L",
+                position("position_error_median_over_L"),
+                {"marker": "s", "color": "tab:orange"},
+            ),
+        ],
+        "value",
+        absolute=True,
+    )
+    ax_peak.set_ylabel("|ε_x| / L (bars: bootstrap 95 % intervals)")
+    ratios = [c["delta_n_max"] / c["G"] for c in positive]
+    if ratios:
+        ratio = float(np.median(ratios))
+        top = ax_peak.secondary_xaxis("top", functions=(lambda g: g * ratio, lambda d: d / ratio))
+        top.set_xlabel("Δn_max")
+    panel_title(ax_peak, "b", "peak and median against G")
+    return figure, {"panels": {"a": {"series": series}, "b": data}}
+
+
+def _kinematic_error(all_tables, cases, group, title):
+    """Velocity (``u``) or acceleration (``a``) error figure: the paper's six panels and two."""
+    symbol = "u" if group.startswith("velocity") else "a"
+    figure, axes = new_figure(2, 4)
+    colors = case_colors(len(cases))
+    tables_kept = [kinematic_rows(tables, group) for tables in all_tables]
+    panels = {}
+    for ax, letter, component in (
+        (axes[0, 0], "a", "3"),
+        (axes[0, 1], "b", "2"),
+        (axes[0, 2], "c", "magnitude"),
+    ):
+        samples = [relative_errors(t, symbol, component, "meas", "ref") for t in tables_kept]
+        series, edges = pdf_series(samples, cases)
+        if component == "magnitude":
+            xlabel = f"ε_|{symbol}| / |{symbol}| (relative error of the magnitude)"
+            text = f"PDF of ε_|{symbol}| / |{symbol}|"
+        else:
+            xlabel = f"ε_{symbol}{component} / {symbol}{component} (relative error)"
+            text = f"PDF of ε_{symbol}{component} / {symbol}{component}"
+        draw_pdf_series(ax, series, edges, colors, xlabel, legend=False)
+        panel_title(ax, letter, text)
+        panels[letter] = {"quantity": xlabel, "bin_edges": edges.tolist(), "series": series}
+
+    ax = axes[0, 3]
+    angle_series = []
+    for tables, case, color in zip(tables_kept, cases, colors, strict=True):
+        measured = (tables[f"{symbol}2_meas"], tables[f"{symbol}3_meas"])
+        entry = {"label": case_label(case)}
+        for against, style in (("ref", "-"), ("true", "--")):
+            angles = angle_deg(
+                measured, (tables[f"{symbol}2_{against}"], tables[f"{symbol}3_{against}"])
+            )
+            grid, density = density_estimate(angles, log=True)
+            # the kernel's tails would reach past the largest possible angle
+            grid, density = grid[grid <= 180.0], density[grid <= 180.0]
+            entry[against] = {
+                "angle_deg": grid.tolist(),
+                "pdf_log10": density.tolist(),
+                "n_zero": int(np.count_nonzero(angles == 0)),
+            }
+            if grid.size >= 2:
+                ax.plot(grid, density, style, color=color, lw=1)
+        angle_series.append(entry)
+    ax.set_xscale("log")
+    ax.set_xlabel(f"angle between {symbol}' and {symbol}^ref or {symbol} (degrees)")
+    ax.set_ylabel("PDF of log10(angle)")
+    ax.grid(True, which="major", alpha=0.3)
+    panel_title(
+        ax,
+        "d",
+        f"direction of {symbol}': solid, angle to {symbol}^ref (refraction); dashed, "
+        f"to {symbol} (refraction and baseline, the paper's)",
+        fontsize=8,
+    )
+    panels["d"] = {"series": angle_series}
+
+    components = ((f"{symbol}3", "o"), (f"{symbol}2", "s"), ("magnitude", "^"))
+
+    def summary_of(key, conditioned=False):
+        def getter(case):
+            summary = case.get(group, {}).get(key)
+            return summary["conditioned"] if summary and conditioned else summary
+
+        return getter
+
+    def name(key):
+        return f"|{symbol}|" if key == "magnitude" else key
+
+    panels["e"] = statistic_against_g(
+        axes[1, 0],
+        cases,
+        [(f"{name(k)}: |mean(ε/{name(k)})|", summary_of(k), {"marker": m}) for k, m in components],
+        "systematic",
+        absolute=True,
+    )
+    axes[1, 0].set_ylabel("|systematic error| = |mean(ε/truth)|")
+    panel_title(axes[1, 0], "e", "the paper's systematic error")
+    panels["f"] = statistic_against_g(
+        axes[1, 1],
+        cases,
+        [(f"{name(k)}: std(ε/{name(k)})", summary_of(k), {"marker": m}) for k, m in components],
+        "random",
+        absolute=True,
+    )
+    axes[1, 1].set_ylabel("random error = std(ε/truth)")
+    panel_title(axes[1, 1], "f", "the paper's random error (may not converge)")
+    panels["g"] = statistic_against_g(
+        axes[1, 2],
+        cases,
+        [
+            (f"{name(k)}: rms(ε)/rms({name(k)})", summary_of(k), {"marker": m})
+            for k, m in components
+        ],
+        "rms_normalized",
+        absolute=True,
+    )
+    axes[1, 2].set_ylabel("rms(ε) / rms(truth)")
+    panel_title(axes[1, 2], "g", "robust: rms(ε) / rms(truth)")
+    key = f"{symbol}3"
+    panels["h"] = statistic_against_g(
+        axes[1, 3],
+        cases,
+        [
+            (f"IQR of ε_{key}/{key}", summary_of(key), {"marker": "o"}),
+            (f"IQR, |{key}| ≥ ½ rms({key})", summary_of(key, True), {"marker": "s"}),
+            (
+                f"|median| of ε_{key}/{key}",
+                _with_statistic(summary_of(key), "median"),
+                {"marker": "^"},
+            ),
+        ],
+        "iqr",
+        absolute=True,
+    )
+    axes[1, 3].set_ylabel("interquartile range (or |median|) of ε/truth")
+    panel_title(axes[1, 3], "h", f"robust: quartiles of ε_{key}/{key}")
+    # the cases of panels (a)-(d) in one legend beside them, off the data
+    exactly_zero = {entry["label"] for entry in panels["a"]["series"] if entry["exactly_zero"]}
+    handles = [
+        Line2D(
+            [],
+            [],
+            color=color,
+            label=case_label(case)
+            + (": ε = 0 exactly" if case_label(case) in exactly_zero else ""),
+        )
+        for case, color in zip(cases, colors, strict=True)
+    ]
+    figure.legend(handles=handles, loc="outside right upper", fontsize=7, title="(a)–(d)")
+    figure_title(figure, title + " (bars: bootstrap 95 % intervals)", fontsize=11)
+    return figure, {"panels": panels}
+
+
+def _with_statistic(getter, statistic):
+    """A getter whose ``iqr`` is another statistic of the summary (to share a panel)."""
+
+    def renamed(case):
+        summary = getter(case)
+        if summary is None:
+            return None
+        return {"iqr": summary[statistic], "ci95": {"iqr": summary["ci95"][statistic]}}
+
+    return renamed
+
+
+def _air_and_water(cases):
+    """Indices of the cases shown as 'air' and 'water': C1 and C4, else the extreme G > 0."""
+    names = [c["name"] for c in cases]
+    positive = [i for i, c in enumerate(cases) if c["G"] > 0] or list(range(len(cases)))
+    air = names.index("C1") if "C1" in names else positive[0]
+    water = names.index("C4") if "C4" in names else positive[-1]
+    return air, water
+
+
+def draw_maps(all_tables, cases):
+    air, water = _air_and_water(cases)
+    figure, axes = new_figure(2, 4, size=(4.2, 3.6))
+    panels = {}
+    acceleration = "acceleration_fit" if all_tables[air].acceleration_fit else "acceleration"
+    frame0 = first_frame_rows(all_tables[air].tracers)
+    position = dict(
+        zip(
+            frame0["id"].tolist(),
+            zip(frame0["x2_true"], frame0["x3_true"], strict=True),
+            strict=True,
+        )
+    )
+    letters = iter("abcdefgh")
+    for row, (symbol, group) in enumerate((("u", "velocity"), ("a", acceleration))):
+        truth = first_frame_rows(kinematic_rows(all_tables[air], group))
+        truth = truth.get(f"{symbol}3_true", np.zeros(0))
+        limit = float(np.percentile(np.abs(truth), 98)) if truth.size else 1.0
+        columns = (
+            ("truth", air, "true"),
+            ("uniform medium (no refraction)", air, "ref"),
+            (f"measured, {case_label(cases[air])}", air, "meas"),
+            (f"measured, {case_label(cases[water])}", water, "meas"),
+        )
+        for col, (label, index, kind) in enumerate(columns):
+            ax = axes[row, col]
+            table = first_frame_rows(kinematic_rows(all_tables[index], group))
+            values = table.get(f"{symbol}3_{kind}", np.zeros(0))
+            xy = np.array([position.get(int(i), (np.nan, np.nan)) for i in table.get("id", [])])
+            if xy.size:
+                mesh = ax.scatter(
+                    xy[:, 0], xy[:, 1], c=values, s=9, cmap="RdBu_r", vmin=-limit, vmax=limit
+                )
+                figure.colorbar(mesh, ax=ax, label=f"{symbol}3 (field units)", extend="both")
+            ax.set_aspect("equal")
+            ax.set_xlabel("x2 (field length units)")
+            ax.set_ylabel("x3 (field length units)")
+            method = " (fit)" if group.endswith("_fit") else ""
+            panel_title(ax, next(letters), f"{symbol}3{method}: {label}", fontsize=8)
+            panels[f"{symbol}3 {label}"] = {
+                "id": table.get("id", np.zeros(0)).tolist(),
+                "x2": xy[:, 0].tolist() if xy.size else [],
+                "x3": xy[:, 1].tolist() if xy.size else [],
+                "value": values.tolist(),
+            }
+    figure_title(
+        figure,
+        "Velocity u3 and acceleration a3 at the first frame "
+        "(colour range: the truth's 98th percentile; uniform medium: the measurement "
+        "noise without refraction)",
+        fontsize=9,
+    )
+    return figure, {"panels": panels}
+
+
+def draw_velocity_error(all_tables, cases):
+    return _kinematic_error(
+        all_tables, cases, "velocity", "Velocity error from refraction, ε_u = u' − u^ref"
+    )
+
+
+def draw_acceleration_error(all_tables, cases):
+    group = "acceleration_fit" if any(t.acceleration_fit for t in all_tables) else "acceleration"
+    method = "polynomial fit" if group.endswith("_fit") else "three-point differences"
+    title = f"Acceleration error from refraction, ε_a = a' − a^ref ({method})"
+    return _kinematic_error(all_tables, cases, group, title)
