@@ -345,6 +345,10 @@ def run_study(
     cases = all_cases if mode != "piv" else []
     _check_resources(scene)
     _check_no_links(out_dir)
+    if mode != "ptv":
+        from rimcl.piv.study import configs_from_scene
+
+        configs_from_scene(scene)  # bad [piv] keys: refused before anything is written
     scheduler = scheduler or scene["run"]["scheduler"]
     if scheduler:
         from rimcl.study.distributed import check_scheduler
@@ -404,14 +408,22 @@ def run_study(
             seconds[name] = time.perf_counter() - case_start
             ran.append(name)
             say(f"{step}: done in {seconds[name]:.1f} s")
-        scene_file.settle()
+        if cases:
+            scene_file.settle()  # every case file checked, or measured
         piv_files = []
         if mode != "ptv":
             from rimcl.piv.study import run_study_cases
 
             piv_files, piv_ran = run_study_cases(
-                scene, out_dir, comparable_scene(scene), all_cases, force=force, report=say
+                scene,
+                out_dir,
+                comparable_scene(scene),
+                all_cases,
+                force=force,
+                report=say,
+                before_write=scene_file.settle,
             )
+            scene_file.settle()
             ran += [f"piv/{name}" for name in piv_ran]
             skipped += [f"piv/{name}" for name, _ in all_cases if name not in piv_ran]
         case_files = [case_path(out_dir, name) for name, _ in cases]
