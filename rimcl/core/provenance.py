@@ -11,6 +11,10 @@ from pathlib import Path
 
 from rimcl.core.errors import RimclError
 
+#: File that marks a directory as a rimcl study (rimcl.study.run); other commands never
+#: write their outputs into such a directory.
+STUDY_MARKER = ".rimcl-study"
+
 _PACKAGES = ("rimcl", "numpy", "scipy", "pyopencl", "h5py", "scikit-image", "click", "tifffile")
 
 

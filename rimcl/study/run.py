@@ -43,7 +43,7 @@ from pathlib import Path
 
 from rimcl import __version__
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path
+from rimcl.core.provenance import STUDY_MARKER, atomic_path
 from rimcl.scene.config import DEFAULT_PSF_SIGMA, MeasureConfig
 from rimcl.scene.load import load_scene, scene_text
 from rimcl.study.case_files import (
@@ -56,7 +56,7 @@ from rimcl.study.case_files import (
 from rimcl.study.summary import summary_markdown
 
 #: File that marks a directory as a rimcl study (and is locked while a study runs in it).
-MARKER = ".rimcl-study"
+MARKER = STUDY_MARKER
 #: Name of the one case of a field file that stores δn (its own refractive index).
 DELTA_N_CASE = "delta_n"
 #: Frames every study case images (positions, velocity, acceleration).
