@@ -138,6 +138,11 @@ class PivSettings:
                 f"the first window must be an even number of pixels >= the window "
                 f"({self.window}), got {self.first_window}"
             )
+        if self.passes == 1 and first != self.window:
+            raise RimclError(
+                f"a first window ({self.first_window} px) needs 2 or more passes: one pass "
+                f"correlates the {self.window} px windows only"
+            )
         if not (np.isfinite(self.outlier_eps) and self.outlier_eps > 0):
             raise RimclError(f"the outlier eps must be positive (pixels), got {self.outlier_eps}")
         if not (np.isfinite(self.outlier_threshold) and self.outlier_threshold > 0):

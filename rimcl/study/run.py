@@ -346,9 +346,11 @@ def run_study(
     _check_resources(scene)
     _check_no_links(out_dir)
     if mode != "ptv":
+        from rimcl.piv.render import check_piv_scene
         from rimcl.piv.study import configs_from_scene
 
-        configs_from_scene(scene)  # bad [piv] keys: refused before anything is written
+        # bad [piv] keys, a sheet the field cannot hold: refused before anything is written
+        check_piv_scene(scene["field"]["path"] or None, configs_from_scene(scene)[0])
     scheduler = scheduler or scene["run"]["scheduler"]
     if scheduler:
         from rimcl.study.distributed import check_scheduler
