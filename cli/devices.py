@@ -57,7 +57,10 @@ def devices(as_json):
         click.echo(
             "  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)).rstrip()
         )
-    click.echo("* = default choice (RIMCL_DEVICE, then a GPU, then a CPU)")
+    click.echo(
+        "* = default choice (RIMCL_DEVICE, then a usable GPU, then a usable CPU; "
+        "PoCL first, newest PoCL and LLVM first)"
+    )
     click.echo(
         "kernel shape: rays per work-item, PoCL switch, work-group size of the trace kernels; "
         "measured once per device on first use (rimcl bench --tune measures again), "

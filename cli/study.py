@@ -143,6 +143,24 @@ def study(
         "run.scheduler": scheduler,
     }
     scene = load_scene(scene_file, overrides, preset=preset)
+    if scene["run"]["mode"] == "piv":
+        ignored = [
+            option
+            for option, value in (
+                ("--tracers", tracers),
+                ("--fan", fan),
+                ("--renderer", renderer),
+                ("--pixels", pixels),
+                ("--threshold", threshold),
+                ("--engine", engine),
+            )
+            if value is not None
+        ]
+        if ignored:
+            click.echo(
+                f"note: {', '.join(ignored)} set the PTV cases, which --mode piv does not run; "
+                "PIV frames take the [piv] keys (piv.pixels, piv.rays, piv.density)"
+            )
     result = run_study(
         scene,
         out_dir,

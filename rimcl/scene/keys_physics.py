@@ -56,7 +56,7 @@ def physics_keys():
             1.59,
             "float",
             "particle index (1.59 polystyrene, 1.45 DEHS)",
-            positive=True,
+            minimum=1.0,
         ),
         SceneKey("mie", "particle_absorption", 0.0, "float", "imaginary part of it", minimum=0.0),
         SceneKey(
@@ -65,7 +65,7 @@ def physics_keys():
             None,
             "float",
             "index around the particle; default: the [fluid]'s, else 1",
-            positive=True,
+            minimum=1.0,
             example=1.335,
         ),
         SceneKey("mie", "wavelength_nm", 532.0, "float", "vacuum wavelength (nm)", positive=True),

@@ -35,8 +35,9 @@ from pathlib import Path
 import numpy as np
 
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import versions
+from rimcl.core.provenance import STUDY_MARKER, versions
 from rimcl.stats.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, TracerBootstrap
+from rimcl.stats.consistency import scene_mismatches
 from rimcl.stats.convergence import convergence
 from rimcl.stats.error_blocks import (
     budget_part,
@@ -252,7 +253,7 @@ def compute_stats(all_tables, config=None):
     }
 
 
-def run_stats(paths, out_dir, overwrite=False, figures=True, config=None):
+def run_stats(paths, out_dir, overwrite=False, figures=True, config=None, mixed=False):
     """Statistics (and figures) of several ``rimcl render`` files: what ``rimcl stats`` does.
 
     Parameters
@@ -268,14 +269,38 @@ def run_stats(paths, out_dir, overwrite=False, figures=True, config=None):
         Also draw the figures.
     config : dict, optional
         Extra configuration recorded in every output.
+    mixed : bool
+        Compare render files of different scenes (:mod:`rimcl.stats.consistency`); by
+        default they are refused, naming what differs.
 
     Returns
     -------
     dict
         The ``stats.json`` document.
+
+    Raises
+    ------
+    RimclError
+        Files of different scenes (unless ``mixed``), two files of one case, an output
+        that exists (unless ``overwrite``) or a study directory as ``out_dir`` (its
+        ``stats.json`` is the study's: never replaced, even with ``overwrite``).
     """
     out_dir = Path(out_dir)
+    if (out_dir / STUDY_MARKER).exists() or (
+        (out_dir / "scene.toml").is_file() and (out_dir / "cases").is_dir()
+    ):
+        raise RimclError(
+            f"{out_dir} is a rimcl study directory: its stats.json and figures belong to the "
+            "study (rerun rimcl study there); write these statistics to another --out"
+        )
     all_tables = check_cases([load_render(path) for path in paths])
+    differences = [] if mixed else scene_mismatches(all_tables)
+    if differences:
+        shown = "; ".join(differences[:3]) + ("; ..." if len(differences) > 3 else "")
+        raise RimclError(
+            f"the render files come from different scenes ({shown}); compare them anyway "
+            "with --mixed-scenes"
+        )
     stats_path = out_dir / "stats.json"
     for existing in (stats_path, out_dir / "figures") if figures else (stats_path,):
         if existing.exists() and not overwrite:

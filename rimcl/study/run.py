@@ -35,6 +35,7 @@ are computed once and reused.
 import contextlib
 import dataclasses
 import json
+import os
 import re
 import shutil
 import time
@@ -42,7 +43,7 @@ from pathlib import Path
 
 from rimcl import __version__
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path
+from rimcl.core.provenance import STUDY_MARKER, atomic_path
 from rimcl.scene.config import DEFAULT_PSF_SIGMA
 from rimcl.scene.load import load_scene
 from rimcl.scene.study_config import StudyConfig
@@ -56,7 +57,7 @@ from rimcl.study.case_files import (
 from rimcl.study.summary import summary_markdown
 
 #: File that marks a directory as a rimcl study (and is locked while a study runs in it).
-MARKER = ".rimcl-study"
+MARKER = STUDY_MARKER
 #: Name of the one case of a field file that stores δn (its own refractive index).
 DELTA_N_CASE = "delta_n"
 #: Frames every study case images (positions, velocity, acceleration).
@@ -129,6 +130,25 @@ def _written_by_a_study(out_dir):
         return "study_dir" in config and "scene" in config and (out_dir / "scene.toml").exists()
     except (OSError, ValueError, KeyError, TypeError):
         return False
+
+
+#: The folders a study writes into and removes files from.
+STUDY_FOLDERS = ("cases", "piv", "shards", "figures")
+
+
+def _check_no_links(out_dir):
+    """Refuse a study folder (or a case's shard folder) that is a symbolic link: what the
+    study writes, replaces and removes there would land outside the study directory."""
+    folders = [out_dir / name for name in STUDY_FOLDERS]
+    shards = out_dir / "shards"
+    if shards.is_dir() and not shards.is_symlink():
+        folders += sorted(shards.iterdir())
+    for folder in folders:
+        if folder.is_symlink():
+            raise RimclError(
+                f"{folder} is a symbolic link (to {os.readlink(folder)}); a study writes only "
+                "inside its directory: make it a real folder, or use another --out"
+            )
 
 
 @contextlib.contextmanager
@@ -301,7 +321,8 @@ def run_study(
     scheduler : str, optional
         Measure the cases on Dask (``"local:N"`` or a scheduler address; default: the
         scene's ``run.scheduler``, "" = this process): see :mod:`rimcl.study.distributed`.
-        ``case_seconds`` are then worker seconds.
+        ``case_seconds`` are then worker seconds. Checked in every mode before anything
+        is written (:func:`rimcl.study.scheduler.check_scheduler`).
 
     Returns
     -------
@@ -327,7 +348,23 @@ def run_study(
     all_cases = study_cases(study)
     cases = all_cases if mode != "piv" else []
     _check_resources(study)
+    _check_no_links(out_dir)
+    if mode != "ptv":
+        from rimcl.piv.render import check_piv_scene
+        from rimcl.piv.study import configs_from_study
+
+        # bad [piv] keys, a sheet the field cannot hold: refused before anything is written
+        check_piv_scene(study.field_path or None, configs_from_study(study)[0])
+    scheduler = scheduler or study.run.scheduler
+    if scheduler:
+        from rimcl.study.distributed import check_scheduler
+
+        # every mode: a scheduler that cannot serve is refused before anything is written
+        answered = check_scheduler(scheduler)
+        if not cases:
+            say(f"Dask: {answered}, not used: PIV cases are measured in this process")
     with _claimed(out_dir):
+        _check_no_links(out_dir)  # again under the lock: nothing changes it from here on
         removed = _remove_stale_parts(out_dir)
         if removed:
             say(f"removed {removed} partial file(s) left by an interrupted run")
@@ -337,13 +374,17 @@ def run_study(
         scene_file = _SceneFile(out_dir, study)
         ran, skipped, seconds = [], [], {}
         todo = cases
-        scheduler = scheduler or study.run.scheduler
         if scheduler and cases:
             from rimcl.study.distributed import measure_cases
 
-            scene_file.settle()
             ran, skipped, seconds = measure_cases(
-                study, out_dir, scheduler, force=force, progress=progress, report=say
+                study,
+                out_dir,
+                scheduler,
+                force=force,
+                progress=progress,
+                report=say,
+                connected=scene_file.settle,
             )
             todo = []  # the cluster measured every case
         references = {}  # threshold -> reference images (they depend on it, not on the case)
@@ -373,14 +414,22 @@ def run_study(
             seconds[name] = time.perf_counter() - case_start
             ran.append(name)
             say(f"{step}: done in {seconds[name]:.1f} s")
-        scene_file.settle()
+        if cases:
+            scene_file.settle()  # every case file checked, or measured
         piv_files = []
         if mode != "ptv":
             from rimcl.piv.study import run_study_cases
 
             piv_files, piv_ran = run_study_cases(
-                study, out_dir, comparable_scene(study), all_cases, force=force, report=say
+                study,
+                out_dir,
+                comparable_scene(study),
+                all_cases,
+                force=force,
+                report=say,
+                before_write=scene_file.settle,
             )
+            scene_file.settle()
             ran += [f"piv/{name}" for name in piv_ran]
             skipped += [f"piv/{name}" for name, _ in all_cases if name not in piv_ran]
         case_files = [case_path(out_dir, name) for name, _ in cases]
