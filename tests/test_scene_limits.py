@@ -8,8 +8,9 @@ from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
 from rimcl.piv.analysis import PivSettings
 from rimcl.piv.render import check_piv_scene
-from rimcl.piv.study import configs_from_scene
+from rimcl.piv.study import configs_from_study
 from rimcl.scene.load import load_scene
+from rimcl.scene.study_config import StudyConfig
 
 
 @pytest.mark.parametrize(
@@ -44,10 +45,11 @@ def test_the_default_fit_follows_fewer_frames_instead_of_being_dropped():
 
 def test_a_sheet_thicker_than_the_field_is_refused(tmp_path):
     # the sample is a 2π-periodic box: tracers seeded ± thickness must fit in it
-    check_piv_scene(None, configs_from_scene(load_scene(None, {"piv.sheet_thickness": 3.0}))[0])
+    thin = StudyConfig.from_scene(load_scene(None, {"piv.sheet_thickness": 3.0}))
+    check_piv_scene(None, configs_from_study(thin)[0])
     scene = load_scene(None, {"piv.sheet_thickness": 10.0})
     with pytest.raises(RimclError, match=r"thicker than the field along x1 \(6.28319\).* 3.14"):
-        check_piv_scene(None, configs_from_scene(scene)[0])
+        check_piv_scene(None, configs_from_study(StudyConfig.from_scene(scene))[0])
     out = str(tmp_path / "x")
     result = CliRunner().invoke(cli, ["piv", "render", "--sheet-thickness", "10", "-o", out])
     assert result.exit_code == 1
