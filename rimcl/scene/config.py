@@ -261,7 +261,8 @@ class MieConfig:
 @dataclasses.dataclass(frozen=True)
 class FluidConfig:
     """The fluid of ``dT=…`` / ``dS=…`` cases (:class:`rimcl.fields.media.Fluid`); ``kind = ""``
-    for none. ``light_density``, ``heavy_density``: the field's two fluids (dimensionless)."""
+    for none. ``light_density``, ``heavy_density``: the field's two fluids (dimensionless;
+    None: those the field file records, else 1 and 1.105)."""
 
     kind: str = ""
     temperature_c: float = 20.0
@@ -269,8 +270,8 @@ class FluidConfig:
     pressure_pa: float = 101_325.0
     relative_humidity: float = 0.0
     wavelength_nm: float = 532.0
-    light_density: float = 1.0
-    heavy_density: float = 1.105
+    light_density: float = None
+    heavy_density: float = None
 
     def build(self):
         """The fluid, or None without one."""

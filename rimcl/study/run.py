@@ -192,8 +192,23 @@ def study_cases(scene):
     from rimcl.fields.field_reader import field_kind
     from rimcl.fields.sample import sample_path
 
-    if field_kind(scene["field"]["path"] or sample_path()) == "delta_n":
+    path = scene["field"]["path"] or sample_path()
+    if field_kind(path) == "delta_n":
+        from rimcl.fields.cases import fluid_case
+
+        fluid_cases = [name for name in scene["cases"]["names"] if fluid_case(name)]
+        if fluid_cases:
+            raise RimclError(
+                f"{path} stores its refractive index (delta_n): it runs as is, case "
+                f"{DELTA_N_CASE}; fluid case {', '.join(fluid_cases)} does not apply "
+                f'(set cases.names = ["{DELTA_N_CASE}"])'
+            )
         return [(DELTA_N_CASE, None)]
+    if DELTA_N_CASE in scene["cases"]["names"]:
+        raise RimclError(
+            f"case {DELTA_N_CASE} runs a field file that stores its refractive index; {path} "
+            "stores a density: name its cases (C0..C4, G=<value>, dT=<K>, dS=<g/kg>)"
+        )
     return [(name, name) for name in scene["cases"]["names"]]
 
 
