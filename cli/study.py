@@ -153,6 +153,13 @@ def study(
     )
     echo_case_lines({"cases": [case for case in result.stats["cases"] if "velocity" in case]})
     echo_piv_case_lines(result.stats)
+    from rimcl.study.answer import answer_lines, scene_warnings
+
+    for line in answer_lines(result.stats)[2:]:
+        if line:
+            click.echo(line)
+    for warning in scene_warnings(result.stats, scene):
+        click.echo(f"warning: {warning}")
     click.echo(
         f"{len(result.ran)} cases measured, {len(result.skipped)} kept; "
         f"{Path(out_dir) / 'summary.md'} and stats.json "

@@ -338,6 +338,8 @@ class TimeConfig:
     fit_window, fit_order : int
         The sliding polynomial fit of the tracks (as Lagrangian PTV codes do): odd window
         of frames and polynomial order; fitted estimates need ``frames >= fit_window``.
+    time_s : float, optional
+        Seconds per field time unit (recorded in the outputs for physical units).
     """
 
     frames: int = 3
@@ -345,6 +347,7 @@ class TimeConfig:
     dt: float = None
     fit_window: int = 5
     fit_order: int = 2
+    time_s: float = None
 
     def __post_init__(self):
         if not 1 <= int(self.frames) <= MAX_FRAMES:
@@ -546,6 +549,7 @@ class MeasureConfig:
                 dt=scene["time"]["dt"],
                 fit_window=scene["time"]["fit_window"],
                 fit_order=scene["time"]["fit_order"],
+                time_s=field["time_s"],
             ),
             run=RunConfig(
                 device=run["device"] or None,

@@ -472,6 +472,7 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
     from rimcl.stats.figures_dt_sweep import dt_sweep_data, write_dt_sweep_figure
     from rimcl.stats.render_file import load_render
     from rimcl.stats.tables import write_json
+    from rimcl.stats.units import write_tidy
 
     config = {"scene": scene, "study_dir": str(out_dir)}
     stats = {"cases": [], "config": config}
@@ -505,10 +506,17 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
     if piv_files:
         from rimcl.piv.figures import write_piv_figures
         from rimcl.piv.study import add_study_results
+        from rimcl.study.answer import piv_units
 
         piv_cases = add_study_results(stats, piv_files)
+        for case in stats["cases"]:
+            if "piv" in case:
+                case["piv"]["units"] = piv_units(
+                    case["piv"], scene["field"]["length_m"], scene["field"]["time_s"]
+                )
         if figures:
             write_piv_figures(piv_cases, out_dir / "figures", config=config, overwrite=True)
     write_json(out_dir / "stats.json", stats, overwrite=True)
+    write_tidy(out_dir / "stats.csv", stats)
     _write_text(out_dir / "summary.md", summary_markdown(stats, scene))
     return stats
