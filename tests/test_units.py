@@ -173,3 +173,27 @@ def test_without_scales_outputs_say_field_units(device, tmp_path):
         units["scales"]["in_field_units"] and units["velocity"]["u3"]["rms_truth"]["mm_s"] is None
     )
     assert "*In field units*" in (tmp_path / "summary.md").read_text()
+
+
+def test_case_and_piv_files_open_with_xarray_as_named_dimensions_with_units(study):
+    import xarray as xr
+
+    out, stats = study
+    case_file = out / "cases" / "C3.h5"
+    tracers = xr.open_dataset(case_file, group="tracers", engine="h5netcdf")
+    assert set(tracers.coords) >= {"id", "frame", "time"}
+    assert tracers["x3_meas"].attrs["units"] == "L0"
+    assert tracers["x3_meas"].attrs["si_per_unit"] == pytest.approx(LENGTH_M)
+    grid = tracers.set_index(row=["id", "frame"]).unstack("row")
+    assert grid["x3_meas"].dims == ("id", "frame")
+    assert grid["x3_meas"].shape == (TINY["tracers.count"], TINY["time.frames"])
+    velocity = xr.open_dataset(case_file, group="velocity", engine="h5netcdf")
+    assert velocity["u3_meas"].attrs["units"] == "L0/T0"
+    assert velocity["u3_meas"].attrs["si_per_unit"] == pytest.approx(LENGTH_M / TIME_S)
+    rays = xr.open_dataset(case_file, group="rays", engine="h5netcdf")
+    assert "ray" in rays.dims
+    piv = xr.open_dataset(out / "piv" / "C3.h5", engine="h5netcdf")
+    assert piv["dx_field"].dims == ("row", "column") and piv["dx_field"].attrs["units"] == "px"
+    np.testing.assert_array_equal(piv["row"].values, piv["y"].values[:, 0])
+    # the tables' numbers are the file's columns
+    assert stats["cases"][0]["n_tracers"] == grid.sizes["id"]
