@@ -66,7 +66,11 @@ def _case_list(_ctx, _param, value):
 )
 @click.option("--tracers", type=COUNT, help="Tracers [tracers.count].")
 @click.option("--seed", type=INDEX, help="Random seed [tracers.seed].")
-@click.option("--camera", type=click.Choice(["plane", "pupil"]), help="Camera model [camera.kind].")
+@click.option(
+    "--camera",
+    type=click.Choice(["plane", "pupil", "lens"]),
+    help="Camera model [camera.kind]; lens needs field.length_m (scene or field file).",
+)
 @click.option("--fan", type=COUNT, help="Plane camera rays per side [camera.fan].")
 @click.option("--renderer", type=click.Choice(["exact", "paper"]), help="Renderer [renderer.kind].")
 @click.option("--pixels", type=COUNT, help="Pixels across [renderer.pixels].")

@@ -19,7 +19,7 @@ PEAK_LOCKING_PX = 2.0
 #: rule (Keane & Adrian 1990) as a fraction of the final window.
 PTV_MAX_DISPLACEMENT_PX = 10.0
 PIV_MAX_WINDOW_FRACTION = 0.25
-#: Below this rms displacement (px/frame) the sub-pixel error dominates a PIV vector.
+#: Below this rms displacement (px/frame) the sub-pixel error dominates a vector.
 MIN_DISPLACEMENT_PX = 0.5
 
 
@@ -231,6 +231,12 @@ def _displacement_warnings(case, scene):
         found.append(
             f"{case['name']}: tracers move {moved:.3g} px per frame rms, more than the "
             f"~{PTV_MAX_DISPLACEMENT_PX:g} px a PTV tracker matches reliably: shorten Δt"
+        )
+    if moved is not None and moved < MIN_DISPLACEMENT_PX:
+        found.append(
+            f"{case['name']}: tracers move {moved:.3g} px per frame rms, below "
+            f"{MIN_DISPLACEMENT_PX:g} px: centroid errors of a few 0.01 px become a large "
+            "share of each velocity; lengthen Δt if the flow allows"
         )
     piv = case.get("piv")
     if piv:
