@@ -12,6 +12,8 @@ unaffected.
 
 import numpy as np
 
+#: The dimension added to a table without a unique index (not a column of the table).
+ROW_DIMENSION = "row"
 #: Columns that identify a row, named as coordinates of the others.
 KEY_COLUMNS = ("id", "frame", "time")
 
@@ -38,7 +40,7 @@ def unit_of(name, length_unit="L0", time_unit="T0"):
     return "1"
 
 
-def label_table(group, index=None, units=None, row_name="row"):
+def label_table(group, index=None, units=None, row_name=ROW_DIMENSION):
     """Attach a dimension to every dataset of a table group and write their units.
 
     Parameters
