@@ -66,7 +66,11 @@ def _case_list(_ctx, _param, value):
 )
 @click.option("--tracers", type=COUNT, help="Tracers [tracers.count].")
 @click.option("--seed", type=INDEX, help="Random seed [tracers.seed].")
-@click.option("--camera", type=click.Choice(["plane", "pupil"]), help="Camera model [camera.kind].")
+@click.option(
+    "--camera",
+    type=click.Choice(["plane", "pupil", "lens"]),
+    help="Camera model [camera.kind]; lens needs field.length_m (scene or field file).",
+)
 @click.option("--fan", type=COUNT, help="Plane camera rays per side [camera.fan].")
 @click.option("--renderer", type=click.Choice(["exact", "paper"]), help="Renderer [renderer.kind].")
 @click.option("--pixels", type=COUNT, help="Pixels across [renderer.pixels].")
@@ -171,6 +175,13 @@ def study(
     )
     echo_case_lines({"cases": [case for case in result.stats["cases"] if "velocity" in case]})
     echo_piv_case_lines(result.stats)
+    from rimcl.study.answer import answer_lines, scene_warnings
+
+    for line in answer_lines(result.stats)[2:]:
+        if line:
+            click.echo(line)
+    for warning in scene_warnings(result.stats, scene):
+        click.echo(f"warning: {warning}")
     click.echo(
         f"{len(result.ran)} cases measured, {len(result.skipped)} kept; "
         f"{Path(out_dir) / 'summary.md'} and stats.json "

@@ -32,6 +32,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path, stamp_h5, to_json
+from rimcl.core.tables_h5 import label_grid
 from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair, check_piv_memory
 from rimcl.piv.imaging_config import PivImaging
 from rimcl.piv.render import PivConfig, run_piv_render
@@ -434,7 +435,16 @@ def write_piv_case(path, case, overwrite=True, record=None):
             h5.attrs[STUDY_RECORD] = to_json(record)
         for name in VECTOR_COLUMNS:
             h5.create_dataset(name, data=case.vectors[name])
+        # named dimensions (row along x3, column along x2; window centres in pixels) and
+        # units, for xarray.open_dataset(path)
+        x, y = np.asarray(case.vectors["x"]), np.asarray(case.vectors["y"])
+        label_grid(h5, y[:, 0], x[0, :], _vector_unit)
         stamp_h5(h5, case.render.config, case.render.device)
+
+
+def _vector_unit(name):
+    """Units of a PIV case file's column: positions and displacements in pixels."""
+    return "px" if name in ("x", "y", "row", "column") or name.startswith(("dx_", "dy_")) else "1"
 
 
 def load_piv_case(path):

@@ -295,9 +295,29 @@ def imaging_keys():
             "length_m",
             None,
             "float",
-            "metres per field length unit (the field's physical size; the lens camera needs it)",
+            "metres per field length unit (the field's physical size; the lens camera needs "
+            "it); default: the field file's length_m",
             positive=True,
             example=0.0106,
+        ),
+        SceneKey(
+            "field",
+            "time_s",
+            None,
+            "float",
+            "seconds per field time unit (outputs in ms, mm/s, m/s²); default: the field "
+            "file's time_s, or field.length_m / field.velocity_m_s",
+            positive=True,
+            example=0.3,
+        ),
+        SceneKey(
+            "field",
+            "velocity_m_s",
+            None,
+            "float",
+            "metres per second of one field velocity unit: another way to give field.time_s",
+            positive=True,
+            example=0.035,
         ),
         SceneKey(
             "camera",

@@ -111,17 +111,21 @@ def physics_keys():
         SceneKey(
             "fluid",
             "light_density",
-            1.0,
+            None,
             "float",
-            "the field's light fluid (dimensionless density): the warm or fresh one",
+            "the field's light fluid (dimensionless density): the warm or fresh one; "
+            "default: the field file's rho_light, else 1.0",
             positive=True,
+            example=1.0,
         ),
         SceneKey(
             "fluid",
             "heavy_density",
-            1.105,
+            None,
             "float",
-            "the field's heavy fluid: the cold or salty one",
+            "the field's heavy fluid: the cold or salty one; default: the field file's "
+            "rho_heavy, else 1.105",
             positive=True,
+            example=1.105,
         ),
     )

@@ -106,7 +106,7 @@ def _check_cases(names, where):
     resolved = []
     for case in names:
         try:
-            if fluid_case(case) is not None:
+            if fluid_case(case) is not None or case.strip() == "delta_n":
                 resolved.append(case.strip())
                 continue
             resolved.append(resolve_k_rho(case=case)[0])

@@ -50,6 +50,7 @@ from rimcl.stats.peaks import discrete_mode, pdf_peak
 from rimcl.stats.render_file import OPTICS_COLUMNS, load_render
 from rimcl.stats.summaries import CONDITION_FRACTION, finite_or_none
 from rimcl.stats.tables import NOTE_COLUMN, area_changes, flagged_tracers, rows_of, write_json
+from rimcl.stats.units import case_units, write_tidy
 
 
 def _area_change_peak(tracers):
@@ -179,6 +180,7 @@ def case_statistics(tables):
     case["circularity_peak"] = pdf_peak(tracers["circularity_meas"])
     case["convergence"] = convergence(tables, kept, blocks, refraction)
     case["budget_verdict"] = budget_verdict(case)
+    case["units"] = case_units(tables, case=case)
     case["rays"] = {
         "n_rays": rays_total,
         "n_rays_ok": int(np.sum(tables.tracers["n_rays_ok"])),
@@ -316,4 +318,5 @@ def run_stats(paths, out_dir, overwrite=False, figures=True, config=None, mixed=
 
         write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
     write_json(stats_path, stats, overwrite=True)
+    write_tidy(out_dir / "stats.csv", stats)
     return stats

@@ -47,6 +47,7 @@ from pathlib import Path
 
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path
+from rimcl.core.tables_h5 import ROW_DIMENSION
 from rimcl.study.scheduler import _import_distributed, check_scheduler, parse_scheduler
 
 try:
@@ -164,7 +165,10 @@ def read_shard(path):
             raise RimclError(f"{path} is not a shard file of a distributed study (no reference)")
 
         def table(name):
-            return None if name not in h5 else {k: v[()] for k, v in h5[name].items()}
+            if name not in h5:
+                return None
+            # the row dimension write_render adds is no column: merged files get their own
+            return {k: v[()] for k, v in h5[name].items() if k != ROW_DIMENSION}
 
         return RenderResult(
             attrs={k: v for k, v in h5.attrs.items() if k not in provenance},

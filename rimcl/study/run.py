@@ -214,8 +214,23 @@ def study_cases(study):
     from rimcl.fields.field_reader import field_kind
     from rimcl.fields.sample import sample_path
 
-    if field_kind(study.field_path or sample_path()) == "delta_n":
+    path = study.field_path or sample_path()
+    if field_kind(path) == "delta_n":
+        from rimcl.fields.cases import fluid_case
+
+        fluid_cases = [name for name in study.names if fluid_case(name)]
+        if fluid_cases:
+            raise RimclError(
+                f"{path} stores its refractive index (delta_n): it runs as is, case "
+                f"{DELTA_N_CASE}; fluid case {', '.join(fluid_cases)} does not apply "
+                f'(set cases.names = ["{DELTA_N_CASE}"])'
+            )
         return [(DELTA_N_CASE, None)]
+    if DELTA_N_CASE in study.names:
+        raise RimclError(
+            f"case {DELTA_N_CASE} runs a field file that stores its refractive index; {path} "
+            "stores a density: name its cases (C0..C4, G=<value>, dT=<K>, dS=<g/kg>)"
+        )
     return [(name, name) for name in study.names]
 
 
@@ -510,6 +525,7 @@ def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=()):
     from rimcl.stats.figures_dt_sweep import dt_sweep_data, write_dt_sweep_figure
     from rimcl.stats.render_file import load_render
     from rimcl.stats.tables import write_json
+    from rimcl.stats.units import write_tidy
 
     config = {"scene": study.scene_record(), "study_dir": str(out_dir)}
     stats = {"cases": [], "config": config}
@@ -545,10 +561,17 @@ def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=()):
     if piv_files:
         from rimcl.piv.figures import write_piv_figures
         from rimcl.piv.study import add_study_results
+        from rimcl.study.answer import piv_units
 
         piv_cases = add_study_results(stats, piv_files)
+        for case in stats["cases"]:
+            if "piv" in case:
+                case["piv"]["units"] = piv_units(
+                    case["piv"], study.shared.camera.length_m, study.shared.time.time_s
+                )
         if figures:
             write_piv_figures(piv_cases, out_dir / "figures", config=config, overwrite=True)
     write_json(out_dir / "stats.json", stats, overwrite=True)
+    write_tidy(out_dir / "stats.csv", stats)
     _write_text(out_dir / "summary.md", summary_markdown(stats, study))
     return stats
