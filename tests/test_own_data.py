@@ -182,16 +182,17 @@ def test_delta_n_files_run_as_is_and_refuse_fluid_cases(tank):
 
 def test_study_scene_names_delta_n(tank):
     from rimcl.scene.load import load_scene
+    from rimcl.scene.study_config import StudyConfig
     from rimcl.study.run import study_cases
 
     imported, _ = tank
     scene = load_scene(None, {"field.path": str(imported), "cases.names": ["delta_n"]})
-    assert study_cases(scene) == [("delta_n", None)]
+    assert study_cases(StudyConfig.from_scene(scene)) == [("delta_n", None)]
     scene = load_scene(
         None, {"field.path": str(imported), "cases.names": ["dT=2"], "fluid.kind": "water"}
     )
     with pytest.raises(RimclError, match="does not apply"):
-        study_cases(scene)
+        study_cases(StudyConfig.from_scene(scene))
 
 
 def test_netcdf_dimension_without_coordinates_is_one_line(tmp_path):
