@@ -1,7 +1,8 @@
 """The LPT scene: ``[rig]`` (cameras), ``[illumination]`` (the seeded slab) and ``[lpt]``.
 
 An LPT scene is a TOML file with these three sections plus the study's ``[field]``,
-``[cases]``, ``[tracers]``, ``[time]``, ``[integrator]``, ``[run]`` and ``[fluid]``
+``[cases]``, ``[tracers]``, ``[time]``, ``[integrator]``, ``[run]``, ``[fluid]``, ``[sensor]``
+and ``[mie]``
 (checked by :func:`rimcl.scene.load.validate_scene`). Every key is optional; unknown keys
 are refused with the closest valid name. Cameras are ``[[rig.cameras]]`` tables, or a
 preset (``rig.preset``) builds them from the field's size:
@@ -37,7 +38,17 @@ PRESETS = ("lpt-challenge", "stereo")
 MODELS = ("soloff", "pinhole")
 ENGINES = ("device", "numpy")
 #: Sections of the study's scene that an LPT scene uses (checked by the study's loader).
-STUDY_SECTIONS = ("field", "cases", "tracers", "time", "integrator", "run", "fluid")
+STUDY_SECTIONS = (
+    "field",
+    "cases",
+    "tracers",
+    "time",
+    "integrator",
+    "run",
+    "fluid",
+    "sensor",
+    "mie",
+)
 #: Cases an LPT scene runs when ``cases.names`` is not given.
 DEFAULT_CASES = ("C1", "C2", "C3")
 #: The first LPT challenge's camera angles (degrees from x1, towards +x2).
@@ -100,6 +111,9 @@ class LptSettings:
     engine: str = "device"
     match_tolerances_px: tuple = (0.5, 1.0, 2.0)
     images: bool = True
+    bit_depth: int = 16
+    exposure: float = 0.5
+    threshold: float = 0.05
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,6 +161,9 @@ _LPT_KEYS = {
     "engine": "str",
     "match_tolerances_px": "pfloats",
     "images": "bool",
+    "bit_depth": "int",
+    "exposure": "pfloat",
+    "threshold": "pfloat",
 }
 _CHOICES = {"rig.preset": ("", *PRESETS), "lpt.model": MODELS, "lpt.engine": ENGINES}
 
@@ -283,6 +300,11 @@ def parse_lpt_scene(raw, where="the scene"):
     settings = LptSettings(**lpt)
     if settings.calibration_planes < 3:
         raise RimclError(f"lpt.calibration_planes in {where}: the Soloff fit needs at least 3")
+    if not 8 <= settings.bit_depth <= 16:
+        raise RimclError(f"lpt.bit_depth in {where} must be 8 to 16, got {settings.bit_depth}")
+    for name in ("exposure", "threshold"):
+        if not getattr(settings, name) < 1:
+            raise RimclError(f"lpt.{name} in {where} must be a fraction below 1")
     if min(settings.calibration_grid) < 4:
         raise RimclError(f"lpt.calibration_grid in {where}: at least 4 x 4 points per plane")
     return LptScene(RigConfig(**rig), IlluminationConfig(**illumination), settings, study)

@@ -25,6 +25,16 @@ from rimcl.lpt.calibration import PinholeModel, SoloffModel, target_points, tria
 from rimcl.lpt.config import CameraSpec, preset_cameras
 from rimcl.lpt.config import describe as describe_scene
 from rimcl.lpt.flow import BUILTIN_DT, Volume, builtin_flow, volume_velocity
+from rimcl.lpt.images import (
+    PASSES,
+    camera_imaging,
+    locate_view,
+    new_canvas,
+    noiseless,
+    ray_light,
+    rig_exposure,
+    unusable,
+)
 from rimcl.lpt.rig import RigCamera
 from rimcl.lpt.views import Tracer, choose_ray_count, uniform_field, view
 from rimcl.optics.camera import FlatWindow
@@ -37,6 +47,8 @@ RAY_SAMPLE = 32
 #: Flag bits of a tracer: a ray that did not reach the exit face, an image off a sensor.
 FLAG_RAY_FAILED = 1
 FLAG_OFF_SENSOR = 2
+#: An image not located in some camera and frame (below threshold, cut by its window, ...).
+FLAG_IMAGE_LOST = 4
 
 
 @dataclasses.dataclass
@@ -189,15 +201,61 @@ def _off_sensor(camera, pixels):
     return ~inside
 
 
-def run_case(run, scene, case, device=None, progress=None):
-    """Measure one case: views, triangulation, tracks (see the module's steps).
+def _sensor_and_mie(scene, n_ref):
+    """The sensor (``[sensor]``, ``lpt.bit_depth`` bits) and the Mie weights (``[mie]``; the
+    particle's surroundings default to the case's reference fluid), or None with Mie off."""
+    from rimcl.scene.config import MieConfig, SensorConfig
+
+    study = scene.study
+    sensor = SensorConfig(**study["sensor"]).build(scene.lpt.bit_depth, study["tracers"]["seed"])
+    mie = MieConfig(**study["mie"])
+    if mie.fluid_index is None:
+        mie = dataclasses.replace(mie, fluid_index=float(n_ref))
+    return sensor, mie.build()
+
+
+def _choose_rays(field, cameras, imagings, exposure, sensor, mie, points, tracer, settings):
+    """Per camera, the ray count whose located centroid (noiseless sensor) has converged."""
+    choices = []
+    for c, camera in enumerate(cameras):
+        quiet = dataclasses.replace(imagings[c], sensor=noiseless(sensor))
+
+        def located(seen, quiet=quiet, c=c):
+            light = ray_light(seen, mie)
+            key = (PASSES["meas"], 0, c)
+            return locate_view(quiet, seen, light, exposure.counts_per_light, key).centroid
+
+        choices.append(
+            choose_ray_count(
+                field,
+                camera,
+                points,
+                tracer,
+                settings.ray_tolerance_px,
+                settings.max_rays,
+                centroid=located,
+            )
+        )
+    return choices
+
+
+def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
+    """Measure one case: views, images, triangulation, tracks (see the module's steps).
+
+    Parameters
+    ----------
+    frame_sink : callable, optional
+        ``frame_sink(case, kind, camera, frame, counts)`` receives every camera frame
+        (``kind`` ``"meas"`` or ``"ref"``, counts uint16 (rows, columns)).
 
     Returns
     -------
     dict
-        Arrays (``centroid_meas``/``ref`` (F, C, N, 2), ``x_meas``/``x_ref`` (F, N, 3),
-        ``disparity_meas``/``ref`` (F, N, C), ``failed_rays`` (F, C, N), ``flags`` (N,)),
-        the cameras, calibration, ray choices and stage ``timings`` (s).
+        Arrays (``centroid_meas``/``ref`` (F, C, N, 2) located, ``optics_meas``/``ref``
+        (F, C, N, 2) the rays' mean image points, ``x_meas``/``x_ref`` and
+        ``x_opt_meas``/``x_opt_ref`` (F, N, 3), ``disparity_*`` (F, N, C), ``image_flags_*``
+        (F, C, N), ``failed_rays`` (F, C, N), ``flags`` (N,)), the cameras, calibration,
+        exposure, ray choices and stage ``timings`` (s).
     """
     from rimcl.ptv.field_source import case_of
     from rimcl.scene.config import FluidConfig
@@ -216,49 +274,73 @@ def run_case(run, scene, case, device=None, progress=None):
     timings["calibration"] = time.perf_counter() - started
     tracer = _tracer(scene, device)
     uniform = uniform_field(field0)
+    sensor, mie = _sensor_and_mie(scene, field0.n_ref)
     started = time.perf_counter()
+    chief = [view(uniform, camera, run.true[0], 1, tracer) for camera in cameras]
+    exposure = rig_exposure(cameras, chief, mie, sensor, settings.exposure, settings.threshold)
+    imagings = [camera_imaging(camera, c, exposure, sensor) for c, camera in enumerate(cameras)]
     sample = run.true[0][:RAY_SAMPLE]
-    choices = [
-        choose_ray_count(
-            field0, camera, sample, tracer, settings.ray_tolerance_px, settings.max_rays
-        )
-        for camera in cameras
-    ]
+    choices = _choose_rays(
+        field0, cameras, imagings, exposure, sensor, mie, sample, tracer, settings
+    )
     timings["ray_choice"] = time.perf_counter() - started
     frames, count, ncam = run.true.shape[0], run.true.shape[1], len(cameras)
-    centroid = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in ("meas", "ref")}
+    kinds = ("meas", "ref")
+    centroid = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
+    optics = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
+    image_flags = {kind: np.zeros((frames, ncam, count), dtype=np.int64) for kind in kinds}
+    peaks = {kind: np.full((frames, ncam, count), np.nan) for kind in kinds}
     failed = np.zeros((frames, ncam, count), dtype=np.int32)
-    timings["views"] = 0.0
+    timings["views"] = timings["images"] = 0.0
     for k, moment in enumerate(run.times):
         started = time.perf_counter()
         field = field0 if k == 0 else index.field(run.source, None, moment)
         timings["field"] += time.perf_counter() - started
-        started = time.perf_counter()
         for c, camera in enumerate(cameras):
-            rays = choices[c]["rays"]
-            seen = view(field, camera, run.true[k], rays, tracer)
-            centroid["meas"][k, c] = seen.centroid
-            failed[k, c] = seen.failed
-            centroid["ref"][k, c] = view(uniform, camera, run.true[k], rays, tracer).centroid
-        timings["views"] += time.perf_counter() - started
+            for kind, medium in (("meas", field), ("ref", uniform)):
+                started = time.perf_counter()
+                seen = view(medium, camera, run.true[k], choices[c]["rays"], tracer)
+                middle = time.perf_counter()
+                canvas = new_canvas(camera, sensor) if frame_sink else None
+                found = locate_view(
+                    imagings[c],
+                    seen,
+                    ray_light(seen, mie),
+                    exposure.scale,
+                    (PASSES[kind], k, c),
+                    canvas,
+                )
+                timings["views"] += middle - started
+                timings["images"] += time.perf_counter() - middle
+                if kind == "meas":
+                    failed[k, c] = seen.failed
+                centroid[kind][k, c] = found.centroid
+                optics[kind][k, c] = found.optics
+                image_flags[kind][k, c] = found.flags
+                peaks[kind][k, c] = found.peak
+                if frame_sink:
+                    frame_sink(str(index.name), kind, camera, k, canvas.counts)
         if progress:
             progress(case, k + 1, frames)
     started = time.perf_counter()
     positions, disparity = {}, {}
-    for kind in ("meas", "ref"):
-        solved = [triangulate(models, centroid[kind][k]) for k in range(frames)]
-        positions[kind] = np.stack([s[0] for s in solved])
-        disparity[kind] = np.stack([s[1] for s in solved])
+    for kind in kinds:
+        for label, points in ((kind, centroid[kind]), (f"opt_{kind}", optics[kind])):
+            positions[label], disparity[label] = triangulate_frames(models, points)
     pinhole = [f["pinhole"] for f in fitted]
-    pinhole_ref = np.stack([triangulate(pinhole, centroid["ref"][k])[0] for k in range(frames)])
+    pinhole_ref = triangulate_frames(pinhole, centroid["ref"])[0]
     timings["triangulation"] = time.perf_counter() - started
     flags = np.zeros(count, dtype=np.int32)
     flags[np.any(failed > 0, axis=(0, 1))] |= FLAG_RAY_FAILED
     off = np.zeros(count, dtype=bool)
     for c, camera in enumerate(cameras):
-        off |= np.any(_off_sensor(camera, centroid["ref"][:, c]), axis=0)
+        off |= np.any(_off_sensor(camera, optics["ref"][:, c]), axis=0)
     flags[off] |= FLAG_OFF_SENSOR
-    return {
+    lost = np.zeros(count, dtype=bool)
+    for kind in kinds:
+        lost |= np.any(unusable(image_flags[kind]), axis=(0, 1))
+    flags[lost] |= FLAG_IMAGE_LOST
+    result = {
         "case": str(index.name),
         "n_ref": float(field0.n_ref),
         "cameras": cameras,
@@ -273,17 +355,35 @@ def run_case(run, scene, case, device=None, progress=None):
         "target": target,
         "target_pixels": np.stack([f["pixels"] for f in fitted]),
         "rays": choices,
-        "centroid_meas": centroid["meas"],
-        "centroid_ref": centroid["ref"],
-        "x_meas": positions["meas"],
-        "x_ref": positions["ref"],
+        "exposure": exposure.describe(),
+        "sensor": sensor.describe(),
+        "mie": None if mie is None else mie.describe(),
         "x_ref_pinhole": pinhole_ref,
-        "disparity_meas": disparity["meas"],
-        "disparity_ref": disparity["ref"],
         "failed_rays": failed,
         "flags": flags,
         "timings": timings,
     }
+    for kind in kinds:
+        result[f"centroid_{kind}"] = centroid[kind]
+        result[f"optics_{kind}"] = optics[kind]
+        result[f"image_flags_{kind}"] = image_flags[kind]
+        result[f"peak_{kind}"] = peaks[kind]
+        for label in (kind, f"opt_{kind}"):
+            result[f"x_{label}"] = positions[label]
+            result[f"disparity_{label}"] = disparity[label]
+    return result
+
+
+def triangulate_frames(models, pixels):
+    """:func:`~rimcl.lpt.calibration.triangulate` of every frame of ``pixels`` (F, C, N, 2).
+
+    Returns
+    -------
+    positions : ndarray, shape (F, N, 3)
+    disparity : ndarray, shape (F, N, C)
+    """
+    solved = [triangulate(models, frame) for frame in pixels]
+    return np.stack([s[0] for s in solved]), np.stack([s[1] for s in solved])
 
 
 def rms_interval(values, ids, bootstrap):
@@ -329,8 +429,10 @@ def case_statistics(run, result, scene):
     stats["excluded"] = {
         "ray_failed": int(np.sum(result["flags"] & FLAG_RAY_FAILED > 0)),
         "off_sensor": int(np.sum(result["flags"] & FLAG_OFF_SENSOR > 0)),
+        "image_lost": int(np.sum(result["flags"] & FLAG_IMAGE_LOST > 0)),
     }
     x_meas, x_ref = result["x_meas"][:, keep], result["x_ref"][:, keep]
+    optics = result["x_opt_meas"][:, keep] - result["x_opt_ref"][:, keep]
     truth = run.true[:, keep]
     position = {}
     for axis, name in enumerate(COMPONENTS):
@@ -338,6 +440,8 @@ def case_statistics(run, result, scene):
         baseline = rms_interval((x_ref - truth)[..., axis].ravel(), ids, bootstrap)
         position[name] = {
             "refraction": refraction,
+            "optics": rms_interval(optics[..., axis].ravel(), ids, bootstrap),
+            "imaging": rms_interval((x_meas - x_ref - optics)[..., axis].ravel(), ids, bootstrap),
             "baseline": baseline,
             "refraction_rms_px": None if refraction["rms"] is None else refraction["rms"] / pixel,
             "refraction_rms_um": None
@@ -347,7 +451,7 @@ def case_statistics(run, result, scene):
     stats["position"] = position
     stats["pixel_size"] = pixel
     disparity = {}
-    for kind in ("meas", "ref"):
+    for kind in ("meas", "ref", "opt_meas", "opt_ref"):
         worst = np.max(result[f"disparity_{kind}"][:, keep], axis=-1).ravel()
         finite = worst[np.isfinite(worst)]
         disparity[kind] = {
@@ -421,7 +525,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
         The statistics document written to ``lpt_stats.json``.
     """
     from rimcl.core.provenance import versions
-    from rimcl.lpt.files import write_case, write_dataset, write_json
+    from rimcl.lpt.files import frame_writer, write_case, write_dataset, write_json
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -443,9 +547,12 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
     }
     try:
         for case in scene.study["cases"]["names"]:
-            result = run_case(run, scene, case, device, progress)
+            sink = frame_writer(out_dir, scene, overwrite) if dataset and scene.lpt.images else None
+            result = run_case(run, scene, case, device, progress, sink)
             stats = case_statistics(run, result, scene)
             stats["rays"] = result["rays"]
+            for name in ("exposure", "sensor", "mie"):
+                stats[name] = result[name]
             stats["calibration_residual_px"] = {
                 cam.name: {
                     "pinhole": cal["pinhole"]["residual_px"],

@@ -20,6 +20,7 @@ on every sampled tracer.
 
 import dataclasses
 import itertools
+import operator
 
 import numpy as np
 
@@ -105,12 +106,15 @@ class View:
         Rays of each tracer that did not leave through the exit face.
     trace : TraceResult
         The traced rays (N·K rows, tracer-major).
+    directions : ndarray, shape (N, K, 3)
+        Each ray's unit direction as it leaves the tracer (for Mie weights).
     """
 
     images: np.ndarray
     centroid: np.ndarray
     failed: np.ndarray
     trace: object
+    directions: np.ndarray
 
 
 #: Re-aims of the chief ray at most, and the miss (field length units) that ends them.
@@ -184,7 +188,13 @@ def view(field, camera, points, rays, tracer):
     images[~ok] = np.nan
     images = images.reshape(len(points), len(pupil), 2)
     failed = np.sum(~ok.reshape(len(points), len(pupil)), axis=1)
-    return View(images, images.mean(axis=1), failed, result)
+    return View(
+        images,
+        images.mean(axis=1),
+        failed,
+        result,
+        directions.reshape(len(points), len(pupil), 3),
+    )
 
 
 def ray_counts(max_rays):
@@ -196,7 +206,7 @@ def ray_counts(max_rays):
     return counts
 
 
-def choose_ray_count(field, camera, points, tracer, tolerance_px, max_rays):
+def choose_ray_count(field, camera, points, tracer, tolerance_px, max_rays, centroid=None):
     """The fewest rays per tracer whose image centroid has converged.
 
     Parameters
@@ -208,6 +218,9 @@ def choose_ray_count(field, camera, points, tracer, tolerance_px, max_rays):
     tolerance_px : float
         Largest allowed change of a centroid (px) to the next count.
     max_rays : int
+    centroid : callable, optional
+        ``centroid(view) -> (N, 2)`` px: the centroid tested (the rendered and located
+        image, :mod:`rimcl.lpt.images`); default the mean of the rays' image points.
 
     Returns
     -------
@@ -216,7 +229,9 @@ def choose_ray_count(field, camera, points, tracer, tolerance_px, max_rays):
         per candidate count, the largest centroid change to the next count.
     """
     counts = ray_counts(max_rays)
-    centroids = [view(field, camera, points, count, tracer).centroid for count in counts]
+    if centroid is None:
+        centroid = operator.attrgetter("centroid")
+    centroids = [centroid(view(field, camera, points, count, tracer)) for count in counts]
     changes = []
     for first, second in itertools.pairwise(centroids):
         change = np.linalg.norm(second - first, axis=-1)
