@@ -382,8 +382,10 @@ def triangulate_frames(models, pixels):
     positions : ndarray, shape (F, N, 3)
     disparity : ndarray, shape (F, N, C)
     """
-    solved = [triangulate(models, frame) for frame in pixels]
-    return np.stack([s[0] for s in solved]), np.stack([s[1] for s in solved])
+    frames, cameras, count = pixels.shape[:3]
+    flat = np.moveaxis(pixels, 1, 0).reshape(cameras, frames * count, 2)
+    positions, disparity = triangulate(models, flat)  # every frame at once: one Newton loop
+    return positions.reshape(frames, count, 3), disparity.reshape(frames, count, cameras)
 
 
 def rms_interval(values, ids, bootstrap):
