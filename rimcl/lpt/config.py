@@ -114,6 +114,9 @@ class LptSettings:
     bit_depth: int = 16
     exposure: float = 0.5
     threshold: float = 0.05
+    self_calibration: bool = True
+    self_calibration_cells: tuple = (3, 5, 5)
+    self_calibration_iterations: int = 3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -164,6 +167,9 @@ _LPT_KEYS = {
     "bit_depth": "int",
     "exposure": "pfloat",
     "threshold": "pfloat",
+    "self_calibration": "bool",
+    "self_calibration_cells": "triple_int",
+    "self_calibration_iterations": "int",
 }
 _CHOICES = {"rig.preset": ("", *PRESETS), "lpt.model": MODELS, "lpt.engine": ENGINES}
 
@@ -213,6 +219,10 @@ def _value(kind, value, name):
     if kind == "pair_int":
         if not isinstance(value, list) or len(value) != 2:
             raise RimclError(f"{name} must be two whole numbers, got {value!r}")
+        return tuple(_value("int", v, name) for v in value)
+    if kind == "triple_int":
+        if not isinstance(value, list) or len(value) != 3:
+            raise RimclError(f"{name} must be three whole numbers (x1, x2, x3), got {value!r}")
         return tuple(_value("int", v, name) for v in value)
     if kind == "pair_fraction":
         if not isinstance(value, list) or len(value) != 2:
@@ -305,6 +315,11 @@ def parse_lpt_scene(raw, where="the scene"):
     for name in ("exposure", "threshold"):
         if not getattr(settings, name) < 1:
             raise RimclError(f"lpt.{name} in {where} must be a fraction below 1")
+    if settings.self_calibration and settings.model != "soloff":
+        raise RimclError(
+            f"{where}: lpt.self_calibration corrects Soloff models; set lpt.model = "
+            '"soloff" or lpt.self_calibration = false'
+        )
     if min(settings.calibration_grid) < 4:
         raise RimclError(f"lpt.calibration_grid in {where}: at least 4 x 4 points per plane")
     return LptScene(RigConfig(**rig), IlluminationConfig(**illumination), settings, study)

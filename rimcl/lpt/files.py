@@ -75,6 +75,8 @@ def write_case(path, run, result, scene, overwrite=True):
             tracks[f"x{axis + 1}_ref"] = result["x_ref"][..., axis]
             tracks[f"x{axis + 1}_opt_meas"] = result["x_opt_meas"][..., axis]
             tracks[f"x{axis + 1}_opt_ref"] = result["x_opt_ref"][..., axis]
+            if "x_vsc" in result:
+                tracks[f"x{axis + 1}_vsc"] = result["x_vsc"][..., axis]
             tracks[f"u{axis + 1}_true"] = run.u_true[..., axis]
             tracks[f"a{axis + 1}_true"] = run.a_true[..., axis]
         cameras = h5.create_group("cameras")
@@ -87,6 +89,8 @@ def write_case(path, run, result, scene, overwrite=True):
                 group[f"peak_{kind}"] = result[f"peak_{kind}"][:, c]
                 group[f"disparity_{kind}"] = result[f"disparity_{kind}"][..., c]
                 group[f"disparity_opt_{kind}"] = result[f"disparity_opt_{kind}"][..., c]
+            if "disparity_vsc" in result:
+                group["disparity_vsc"] = result["disparity_vsc"][..., c]
             group["failed_rays"] = result["failed_rays"][:, c]
             group.attrs["parameters"] = to_json(camera.describe())
             group.attrs["calibration"] = to_json(result["calibration"][c])
@@ -97,6 +101,7 @@ def write_case(path, run, result, scene, overwrite=True):
         h5.attrs["exposure"] = to_json(result["exposure"])
         h5.attrs["sensor"] = to_json(result["sensor"])
         h5.attrs["mie"] = to_json(result["mie"])
+        h5.attrs["self_calibration"] = to_json(result["self_calibration"])
     return path
 
 

@@ -36,6 +36,7 @@ from rimcl.lpt.images import (
     unusable,
 )
 from rimcl.lpt.rig import RigCamera
+from rimcl.lpt.selfcal import self_calibrate
 from rimcl.lpt.views import Tracer, choose_ray_count, uniform_field, view
 from rimcl.optics.camera import FlatWindow
 from rimcl.stats.bootstrap import TracerBootstrap
@@ -330,6 +331,18 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     pinhole = [f["pinhole"] for f in fitted]
     pinhole_ref = triangulate_frames(pinhole, centroid["ref"])[0]
     timings["triangulation"] = time.perf_counter() - started
+    calibrated = None
+    if settings.self_calibration:
+        started = time.perf_counter()
+        every = np.moveaxis(centroid["meas"], 1, 0).reshape(ncam, frames * count, 2)
+        calibrated = self_calibrate(
+            models,
+            every,
+            settings.self_calibration_cells,
+            settings.self_calibration_iterations,
+        )
+        positions["vsc"], disparity["vsc"] = triangulate_frames(calibrated.models, centroid["meas"])
+        timings["self_calibration"] = time.perf_counter() - started
     flags = np.zeros(count, dtype=np.int32)
     flags[np.any(failed > 0, axis=(0, 1))] |= FLAG_RAY_FAILED
     off = np.zeros(count, dtype=bool)
@@ -358,6 +371,7 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
         "exposure": exposure.describe(),
         "sensor": sensor.describe(),
         "mie": None if mie is None else mie.describe(),
+        "self_calibration": None if calibrated is None else calibrated.describe(),
         "x_ref_pinhole": pinhole_ref,
         "failed_rays": failed,
         "flags": flags,
@@ -371,6 +385,8 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
         for label in (kind, f"opt_{kind}"):
             result[f"x_{label}"] = positions[label]
             result[f"disparity_{label}"] = disparity[label]
+    if calibrated is not None:
+        result["x_vsc"], result["disparity_vsc"] = positions["vsc"], disparity["vsc"]
     return result
 
 
@@ -435,6 +451,7 @@ def case_statistics(run, result, scene):
     }
     x_meas, x_ref = result["x_meas"][:, keep], result["x_ref"][:, keep]
     optics = result["x_opt_meas"][:, keep] - result["x_opt_ref"][:, keep]
+    x_vsc = result["x_vsc"][:, keep] if "x_vsc" in result else None
     truth = run.true[:, keep]
     position = {}
     for axis, name in enumerate(COMPONENTS):
@@ -445,6 +462,9 @@ def case_statistics(run, result, scene):
             "optics": rms_interval(optics[..., axis].ravel(), ids, bootstrap),
             "imaging": rms_interval((x_meas - x_ref - optics)[..., axis].ravel(), ids, bootstrap),
             "baseline": baseline,
+            "refraction_self_calibrated": None
+            if x_vsc is None
+            else rms_interval((x_vsc - x_ref)[..., axis].ravel(), ids, bootstrap),
             "refraction_rms_px": None if refraction["rms"] is None else refraction["rms"] / pixel,
             "refraction_rms_um": None
             if refraction["rms"] is None
@@ -453,7 +473,9 @@ def case_statistics(run, result, scene):
     stats["position"] = position
     stats["pixel_size"] = pixel
     disparity = {}
-    for kind in ("meas", "ref", "opt_meas", "opt_ref"):
+    for kind in ("meas", "ref", "opt_meas", "opt_ref", "vsc"):
+        if f"disparity_{kind}" not in result:
+            continue
         worst = np.max(result[f"disparity_{kind}"][:, keep], axis=-1).ravel()
         finite = worst[np.isfinite(worst)]
         disparity[kind] = {
@@ -470,7 +492,8 @@ def case_statistics(run, result, scene):
     dt = float(run.times[1] - run.times[0]) if run.times.size > 1 else None
     fits = {
         kind: sliding_fit(result[f"x_{kind}"][:, keep], dt, window, order)
-        for kind in ("meas", "ref")
+        for kind in ("meas", "ref", "vsc")
+        if f"x_{kind}" in result
     }
     centres = fits["meas"].centres
     fit_ids = np.broadcast_to(np.arange(keep.size), (centres.size, keep.size))[:, keep].ravel()
@@ -493,6 +516,15 @@ def case_statistics(run, result, scene):
                 ),
                 "baseline": error_summary(
                     (reference - truth)[..., axis].ravel(),
+                    truth[..., axis].ravel(),
+                    fit_ids,
+                    bootstrap,
+                    condition=False,
+                ),
+                "refraction_self_calibrated": None
+                if "vsc" not in fits
+                else error_summary(
+                    (getattr(fits["vsc"], attribute) - reference)[..., axis].ravel(),
                     truth[..., axis].ravel(),
                     fit_ids,
                     bootstrap,
@@ -553,7 +585,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
             result = run_case(run, scene, case, device, progress, sink)
             stats = case_statistics(run, result, scene)
             stats["rays"] = result["rays"]
-            for name in ("exposure", "sensor", "mie"):
+            for name in ("exposure", "sensor", "mie", "self_calibration"):
                 stats[name] = result[name]
             stats["calibration_residual_px"] = {
                 cam.name: {
@@ -587,6 +619,12 @@ def _cell(value, scale=1.0, digits=3):
     return "n/a" if value is None else f"{value * scale:.{digits}g}"
 
 
+def _px(summary, case):
+    return (
+        None if summary is None or summary["rms"] is None else summary["rms"] / case["pixel_size"]
+    )
+
+
 def summary_lines(document):
     """Short text lines of a run's results (one block per case), for a terminal."""
     lines = [
@@ -615,7 +653,22 @@ def summary_lines(document):
                     for k in COMPONENTS
                 )
             )
-        meas = case["disparity"]["meas"]
-        lost = ", ".join(f">{k} {_cell(v, 100, 3)} %" for k, v in meas["lost_fraction"].items())
-        lines.append(f"  disparity median {_cell(meas['median_px'])} px; matches lost {lost}")
+        for kind, label in (("meas", ""), ("vsc", " (self-calibrated)")):
+            if kind not in case["disparity"]:
+                continue
+            block = case["disparity"][kind]
+            lost = ", ".join(
+                f">{k} {_cell(v, 100, 3)} %" for k, v in block["lost_fraction"].items()
+            )
+            lines.append(
+                f"  disparity{label} median {_cell(block['median_px'])} px; matches lost {lost}"
+            )
+        if case.get("self_calibration"):
+            lines.append(
+                "  self-calibrated position refraction rms (px): "
+                + ", ".join(
+                    f"{k} {_cell(_px(pos[k]['refraction_self_calibrated'], case))}"
+                    for k in COMPONENTS
+                )
+            )
     return lines
