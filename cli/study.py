@@ -48,8 +48,8 @@ def _case_list(_ctx, _param, value):
 @engine_option
 @click.option(
     "--mode",
-    type=click.Choice(["ptv", "piv", "both"]),
-    help="PTV tracks, PIV frames, or both compared [run.mode].",
+    type=click.Choice(["ptv", "piv", "both", "lpt"]),
+    help="PTV tracks, PIV frames, both compared, or 3-D LPT [run.mode].",
 )
 @click.option("--force", is_flag=True, help="Redo every case and the statistics.")
 @click.option("--no-figures", is_flag=True, help="Skip the figures (stats and summary only).")
@@ -153,6 +153,11 @@ def study(
     )
     echo_case_lines({"cases": [case for case in result.stats["cases"] if "velocity" in case]})
     echo_piv_case_lines(result.stats)
+    if "lpt" in result.stats:
+        from rimcl.lpt.run import summary_lines
+
+        for line in summary_lines(result.stats["lpt"]):
+            click.echo(line)
     click.echo(
         f"{len(result.ran)} cases measured, {len(result.skipped)} kept; "
         f"{Path(out_dir) / 'summary.md'} and stats.json "

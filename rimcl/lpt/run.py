@@ -355,6 +355,7 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     flags[lost] |= FLAG_IMAGE_LOST
     result = {
         "case": str(index.name),
+        "abscissa": _abscissa(index),
         "n_ref": float(field0.n_ref),
         "cameras": cameras,
         "calibration": [
@@ -388,6 +389,20 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     if calibrated is not None:
         result["x_vsc"], result["disparity_vsc"] = positions["vsc"], disparity["vsc"]
     return result
+
+
+def _abscissa(index):
+    """What a case is plotted against: ``G``, or a fluid case's ``ΔT``/``ΔS``."""
+    if index.fluid is not None:
+        symbol = "ΔS" if index.fluid.kind == "saltwater" else "ΔT"
+        return {"name": symbol, "value": float(index.difference), "unit": index.fluid.unit}
+    if np.isfinite(index.g):
+        return {"name": "G", "value": float(index.g), "unit": ""}
+    return {"name": "delta_n", "value": None, "unit": ""}
+
+
+#: Bin edges of the disparity histograms (px): log-spaced, 1e-3 to 1e2 px.
+DISPARITY_EDGES = np.logspace(-3, 2, 41)
 
 
 def triangulate_frames(models, pixels):
@@ -478,7 +493,14 @@ def case_statistics(run, result, scene):
             continue
         worst = np.max(result[f"disparity_{kind}"][:, keep], axis=-1).ravel()
         finite = worst[np.isfinite(worst)]
+        counts, _ = np.histogram(finite, bins=DISPARITY_EDGES)
         disparity[kind] = {
+            "histogram": {
+                "edges_px": DISPARITY_EDGES.tolist(),
+                "pdf_per_px": (counts / max(finite.size, 1) / np.diff(DISPARITY_EDGES)).tolist(),
+                "below_first_edge": int(np.sum(finite < DISPARITY_EDGES[0])),
+                "above_last_edge": int(np.sum(finite > DISPARITY_EDGES[-1])),
+            },
             "median_px": float(np.median(finite)) if finite.size else None,
             "p95_px": float(np.percentile(finite, 95)) if finite.size else None,
             "max_px": float(np.max(finite)) if finite.size else None,
@@ -602,6 +624,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
                 for a, name in enumerate(COMPONENTS)
             }
             stats["n_ref"] = result["n_ref"]
+            stats["abscissa"] = result["abscissa"]
             stats["timings_s"] = result["timings"]
             started = time.perf_counter()
             write_case(out_dir / f"lpt_case_{result['case']}.h5", run, result, scene, overwrite)

@@ -14,6 +14,7 @@ A study directory holds:
   else is measured again, with one line saying why;
 - ``piv/<case>.h5`` with ``run.mode = "piv"`` or ``"both"``: the PIV errors of each case
   (:mod:`rimcl.piv.study`), kept on a rerun when complete and of the same scene;
+- with ``run.mode = "lpt"`` instead: ``lpt/`` and ``figures/lpt_*`` (:mod:`rimcl.lpt.study`);
 - ``shards/<case>/<first>-<stop>.h5``: with a Dask scheduler (``run.scheduler``), the
   finished shards of tracers, merged into the case files (:mod:`rimcl.study.distributed`);
 - ``stats.json`` and ``figures/``: statistics and figures of all cases (:mod:`rimcl.stats.document`,
@@ -321,8 +322,9 @@ def run_study(
     out_dir = Path(out_dir)
     mode = scene["run"]["mode"]
     all_cases = study_cases(scene)
-    cases = all_cases if mode != "piv" else []
-    _check_resources(scene)
+    cases = all_cases if mode in ("ptv", "both") else []
+    if mode != "lpt":  # the LPT stage checks its own rig and flow
+        _check_resources(scene)
     with _claimed(out_dir):
         removed = _remove_stale_parts(out_dir)
         if removed:
@@ -331,6 +333,13 @@ def run_study(
         if all_cases[0][0] == DELTA_N_CASE:
             say(f"{scene['field']['path']} stores delta_n: one case, its own index")
         scene_file = _SceneFile(out_dir, scene)
+        if mode == "lpt":
+            from rimcl.lpt.study import run_lpt_study
+
+            scene_file.settle()
+            stats, ran = run_lpt_study(scene, out_dir, force=force, figures=figures, report=say)
+            elapsed = time.perf_counter() - started
+            return StudyResult(out_dir, stats, ran, [], {}, True, elapsed)
         ran, skipped, seconds = [], [], {}
         todo = cases
         scheduler = scheduler or scene["run"]["scheduler"]
