@@ -48,10 +48,10 @@ def test_unknown_and_bad_lpt_keys_are_refused(tmp_path):
     with pytest.raises(RimclError, match="did you mean 'self_calibration'"):
         load_scene(path)
     path.write_text('[run]\nmode = "lpt"\n[rig]\npreset = "stero"\n')
-    with pytest.raises(RimclError, match="rig.preset"):
+    with pytest.raises(RimclError, match=r"rig\.preset"):
         load_scene(path)
     path.write_text("[illumination]\nextent = [0.5, true]\n")
-    with pytest.raises(RimclError, match="illumination.extent"):
+    with pytest.raises(RimclError, match=r"illumination\.extent"):
         load_scene(path)
     path.write_text('[rig]\ncameras = [{ name = "a" }]\n')
     with pytest.raises(RimclError, match="needs position_mm"):
