@@ -102,6 +102,7 @@ def write_case(path, run, result, scene, overwrite=True):
         h5.attrs["sensor"] = to_json(result["sensor"])
         h5.attrs["mie"] = to_json(result["mie"])
         h5.attrs["self_calibration"] = to_json(result["self_calibration"])
+        h5.attrs["matching"] = to_json(result["matching"])
     return path
 
 

@@ -35,6 +35,7 @@ from rimcl.lpt.images import (
     rig_exposure,
     unusable,
 )
+from rimcl.lpt.matching import match_frame
 from rimcl.lpt.rig import RigCamera
 from rimcl.lpt.selfcal import self_calibrate
 from rimcl.lpt.views import Tracer, choose_ray_count, uniform_field, view
@@ -343,6 +344,20 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
         )
         positions["vsc"], disparity["vsc"] = triangulate_frames(calibrated.models, centroid["meas"])
         timings["self_calibration"] = time.perf_counter() - started
+    matching = None
+    if settings.model == "soloff":
+        started = time.perf_counter()
+        chosen = {"meas": models, "ref": models}
+        if calibrated is not None:
+            chosen["vsc"] = calibrated.models
+        matching = {
+            kind: [
+                match_frame(chosen[kind], centroid["ref" if kind == "ref" else "meas"][0], tol)
+                for tol in settings.match_tolerances_px
+            ]
+            for kind in chosen
+        }
+        timings["matching"] = time.perf_counter() - started
     flags = np.zeros(count, dtype=np.int32)
     flags[np.any(failed > 0, axis=(0, 1))] |= FLAG_RAY_FAILED
     off = np.zeros(count, dtype=bool)
@@ -373,6 +388,7 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
         "sensor": sensor.describe(),
         "mie": None if mie is None else mie.describe(),
         "self_calibration": None if calibrated is None else calibrated.describe(),
+        "matching": matching,
         "x_ref_pinhole": pinhole_ref,
         "failed_rays": failed,
         "flags": flags,
@@ -607,7 +623,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
             result = run_case(run, scene, case, device, progress, sink)
             stats = case_statistics(run, result, scene)
             stats["rays"] = result["rays"]
-            for name in ("exposure", "sensor", "mie", "self_calibration"):
+            for name in ("exposure", "sensor", "mie", "self_calibration", "matching"):
                 stats[name] = result[name]
             stats["calibration_residual_px"] = {
                 cam.name: {
@@ -686,6 +702,17 @@ def summary_lines(document):
             lines.append(
                 f"  disparity{label} median {_cell(block['median_px'])} px; matches lost {lost}"
             )
+        for kind, label in (("meas", "field"), ("vsc", "self-calibrated")):
+            rows = (case.get("matching") or {}).get(kind)
+            if rows:
+                lines.append(
+                    f"  matching from the images ({label}, first frame): "
+                    + "; ".join(
+                        f"{r['tolerance_px']:g} px: {r['ghosts']} ghosts, "
+                        f"{r['missed']} missed of {case['tracers']}"
+                        for r in rows
+                    )
+                )
         if case.get("self_calibration"):
             lines.append(
                 "  self-calibrated position refraction rms (px): "
