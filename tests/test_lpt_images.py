@@ -143,3 +143,28 @@ def test_noise_draws_differ_between_cameras_and_passes():
     assert len({tuple(v) for v in values}) == 4  # independent draws
     # shot noise on ~1e4 electrons moves the centroid by a few hundredths of a pixel
     assert np.max(np.abs(values - seen[0].images[0, 0])) < 0.3
+
+
+def test_ray_count_choice_stops_at_the_first_converged_count():
+    """Tracers 12 mm off the focus plane through the uniform fluid: the mirrored pupil
+    spiral keeps the rays' mean image point within 0.004 px of the chief ray's (the window
+    at 30° makes the blur disc slightly lopsided), so the optics centroid converges at one
+    ray; the located centroid changes as the blur disc fills with rays: more are needed."""
+    from rimcl.lpt.views import choose_ray_count
+
+    cameras = _cameras()
+    field = _uniform()
+    points = _centre() + np.array([[0.12, 0.1, 0.05], [-0.12, -0.2, 0.0]])  # ±12 mm deep
+    choice = choose_ray_count(field, cameras[0], points, Tracer(), 0.01, 64)
+    assert choice["rays"] == 1 and choice["converged"] and len(choice["changes_px"]) == 1
+    sensor = Sensor(bit_depth=16)
+    seen = [view(field, c, points, 1, Tracer()) for c in cameras]
+    exposure = rig_exposure(cameras, seen, None, sensor, 0.5, 0.05)
+    imaging = camera_imaging(cameras[0], 0, exposure, sensor)
+
+    def located(v):
+        return locate_view(imaging, v, ray_light(v), exposure.scale, (1, 0, 0)).centroid
+
+    choice = choose_ray_count(field, cameras[0], points, Tracer(), 0.01, 64, centroid=located)
+    assert choice["rays"] > 1 and choice["changes_px"][0] > 0.01
+    assert len(choice["changes_px"]) == choice["counts"].index(choice["rays"]) + 1

@@ -73,8 +73,9 @@ def _cell_index(points, lo, hi, cells):
     """Flat sub-volume index of points (M, 3) in the box, -1 outside."""
     cells = np.asarray(cells)
     scaled = (points - lo) / (hi - lo) * cells
-    index = np.floor(scaled).astype(np.int64)
-    inside = np.all((index >= 0) & (index < cells) & np.isfinite(scaled), axis=1)
+    finite = np.isfinite(scaled)
+    index = np.floor(np.where(finite, scaled, -1.0)).astype(np.int64)  # NaN: a lost point
+    inside = np.all((index >= 0) & (index < cells) & finite, axis=1)
     flat = np.ravel_multi_index(tuple(np.clip(index, 0, cells - 1).T), tuple(cells))
     return np.where(inside, flat, -1)
 

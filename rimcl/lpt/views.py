@@ -159,7 +159,7 @@ def chief_targets(field, camera, points, tracer):
     return targets, miss
 
 
-def view(field, camera, points, rays, tracer):
+def view(field, camera, points, rays, tracer, chief=None):
     """Trace ``rays`` rays from every point to ``camera`` and image them.
 
     Parameters
@@ -171,13 +171,16 @@ def view(field, camera, points, rays, tracer):
     rays : int
         Rays per tracer (1: the chief ray only).
     tracer : Tracer
+    chief : ndarray, shape (N, 3), optional
+        The chief rays' aim points (:func:`chief_targets`), when already known.
 
     Returns
     -------
     View
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    chief, _ = chief_targets(field, camera, points, tracer)
+    if chief is None:
+        chief, _ = chief_targets(field, camera, points, tracer)
     pupil = camera.pupil_points(rays) - camera.position
     directions = camera.aim(points, chief[:, None] + pupil[None]).reshape(-1, 3)
     origins = np.repeat(points, len(pupil), axis=0)
@@ -225,22 +228,29 @@ def choose_ray_count(field, camera, points, tracer, tolerance_px, max_rays, cent
     Returns
     -------
     dict
-        ``rays`` (the choice), ``converged`` (bool), ``tolerance_px``, and ``changes_px``:
-        per candidate count, the largest centroid change to the next count.
+        ``rays`` (the choice), ``converged`` (bool), ``tolerance_px``, ``counts`` (the
+        candidates) and ``changes_px``: per count tried, the largest centroid change to the
+        next count (the search stops at the first change within the tolerance).
     """
     counts = ray_counts(max_rays)
     if centroid is None:
         centroid = operator.attrgetter("centroid")
-    centroids = [centroid(view(field, camera, points, count, tracer)) for count in counts]
-    changes = []
-    for first, second in itertools.pairwise(centroids):
-        change = np.linalg.norm(second - first, axis=-1)
+    chief, _ = chief_targets(field, camera, points, tracer)  # the same for every count
+
+    def located(count):
+        return centroid(view(field, camera, points, count, tracer, chief))
+
+    # counts are tried in turn and the search stops at the first converged one
+    changes, chosen, converged = [], counts[-1], False
+    previous = located(counts[0])
+    for count, following in itertools.pairwise(counts):
+        current = located(following)
+        change = np.linalg.norm(current - previous, axis=-1)
         changes.append(float(np.nanmax(change)) if np.any(np.isfinite(change)) else None)
-    chosen, converged = counts[-1], False
-    for count, change in zip(counts, changes, strict=False):
-        if change is not None and change <= tolerance_px:
+        if changes[-1] is not None and changes[-1] <= tolerance_px:
             chosen, converged = count, True
             break
+        previous = current
     return {
         "rays": int(chosen),
         "converged": converged,
