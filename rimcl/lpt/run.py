@@ -1,14 +1,23 @@
-"""The LPT chain: tracks, views through the field, calibration, triangulation, statistics.
+"""The LPT chain: tracks, views through the field, images, calibration, triangulation,
+self-calibration, matching, statistics.
 
 For each case of the scene (same tracers, same tracks, common random numbers):
 
 1. the rig is built for the case's fluid (its reference index is the calibration fluid);
 2. each camera is calibrated on a target through the uniform fluid (:mod:`.calibration`);
-3. the rays per tracer are chosen by convergence of the image centroid (:mod:`.views`);
+3. the rig's exposure is set from the chief rays through the uniform fluid, and the rays
+   per tracer are chosen by convergence of the located image centroid (:mod:`.images`,
+   :mod:`.views`);
 4. at every frame each tracer is seen by each camera through the field (``meas``) and
-   through the uniform fluid (``ref``), and triangulated on the calibrated models;
-5. tracks are fitted (sliding polynomial, :func:`rimcl.ptv.track.sliding_fit`) and compared:
-   refraction ``meas - ref`` and baseline ``ref - true``, per component.
+   through the uniform fluid (``ref``), its image rendered, digitised and located, and
+   triangulated on the calibrated models, from the located centroids and from the optics
+   centroids (the optics part of the error);
+5. the volume self-calibration corrects the models on the measured images of every frame
+   (:mod:`.selfcal`), and the first frame is matched from the images alone
+   (:mod:`.matching`);
+6. tracks are fitted (sliding polynomial, :func:`rimcl.ptv.track.sliding_fit`) and compared:
+   refraction ``meas - ref`` (with and without the self-calibration) and baseline
+   ``ref - true``, per component.
 
 Units: positions in field length units (``length_m`` metres each), image points in pixels,
 velocities in length/time units, accelerations in length/time² units.
