@@ -3,12 +3,12 @@
 A real LPT code does not know which image belongs to which particle. It takes each image
 point ``a`` of the first camera, follows its line of sight through the volume (the
 calibrated model's points on ``DEPTHS`` planes ``x1 = const`` across the target's box), and
-keeps the image points of the second camera within a tolerance of the projection of that
-line (the epipolar curve). Each pair is triangulated and projected into the other cameras;
-a candidate whose projection has an image point within the tolerance in every camera is a
-match. A match whose image points all belong to one tracer is **true**, any other is a
-**ghost**; a tracer with no true match is **missed** (its disparity exceeds the tolerance
-somewhere, or its image was not located).
+keeps the image points of the last camera (the widest pair of the presets) within a
+tolerance of the projection of that line (the epipolar curve). Each pair is triangulated
+and projected into the other cameras; a candidate whose projection has an image point
+within the tolerance in every camera is a match. A match whose image points all belong to
+one tracer is **true**, any other is a **ghost**; a tracer with no true match is
+**missed** (its disparity exceeds the tolerance somewhere, or its image was not located).
 
 Image points are the located centroids of :func:`rimcl.lpt.run.run_case` (one window per
 tracer, so overlapping images are not merged here: the ghosts counted are those of the
@@ -72,27 +72,33 @@ def match_frame(models, pixels, tolerance_px):
     lo = models[0].centre[0] - models[0].half[0]
     hi = models[0].centre[0] + models[0].half[0]
     depths = np.linspace(lo, hi, DEPTHS)
-    curves = _epipolar_curves(models[0], models[1], pixels[0, seen[0]], depths)
+    # the first and the last camera: the widest pair of the presets, whose two-camera
+    # point is best defined in depth (a narrow pair's depth error, projected into the
+    # other cameras, would throw true matches out)
+    last = cameras - 1
+    curves = _epipolar_curves(models[0], models[last], pixels[0, seen[0]], depths)
     first, second = [], []
     for a, curve in zip(seen[0], curves, strict=True):
         curve = curve[np.all(np.isfinite(curve), axis=1)]
         if len(curve) < 2:
             continue
         reach = tolerance_px + 0.5 * np.max(np.linalg.norm(np.diff(curve, axis=0), axis=1))
-        near = sorted({i for hits in trees[1].query_ball_point(curve, reach) for i in hits})
+        near = sorted({i for hits in trees[last].query_ball_point(curve, reach) for i in hits})
         if not near:
             continue
-        candidates = seen[1][near]
-        close = _segment_distance(pixels[1, candidates], curve[:-1], curve[1:]) <= tolerance_px
+        candidates = seen[last][near]
+        close = _segment_distance(pixels[last, candidates], curve[:-1], curve[1:])
+        close = close <= tolerance_px
         first += [a] * int(close.sum())
         second += list(candidates[close])
     first, second = np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64)
     # every candidate pair at once: triangulated on the first two cameras, then looked for
     # in the others
-    positions, _ = triangulate(models[:2], np.stack([pixels[0, first], pixels[1, second]]))
+    pair = np.stack([pixels[0, first], pixels[last, second]])
+    positions, _ = triangulate([models[0], models[last]], pair)
     valid = np.all(np.isfinite(positions), axis=1)
     same = first == second
-    for c in range(2, cameras):
+    for c in range(1, last):
         projected = models[c].project(np.nan_to_num(positions))
         distance, index = trees[c].query(projected) if len(first) else (np.zeros(0), [])
         valid &= distance <= tolerance_px
