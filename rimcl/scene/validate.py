@@ -53,6 +53,20 @@ def _check_value(key, value, where):
         ):
             raise RimclError(f"{name} must be a list of whole numbers >= 1, got {value!r}")
         return [int(v) for v in value]
+    if key.kind == "floats":
+        if not (
+            isinstance(value, list)
+            and value
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+            and all(math.isfinite(v) for v in value)
+        ):
+            raise RimclError(f"{name} must be a list of numbers, got {value!r}")
+        return [float(v) for v in value]
+    if key.kind == "tables":
+        # the stage that uses them checks their keys (rig.cameras: rimcl.lpt.config)
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise RimclError(f"{name} must be a list of tables ([[{key.dotted}]]), got {value!r}")
+        return value
     if key.kind == "vector":
         if not (
             isinstance(value, list)

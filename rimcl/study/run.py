@@ -14,6 +14,7 @@ A study directory holds:
   else is measured again, with one line saying why;
 - ``piv/<case>.h5`` with ``run.mode = "piv"`` or ``"both"``: the PIV errors of each case
   (:mod:`rimcl.piv.study`), kept on a rerun when complete and of the same scene;
+- with ``run.mode = "lpt"`` instead: ``lpt/`` and ``figures/lpt_*`` (:mod:`rimcl.lpt.study`);
 - ``shards/<case>/<first>-<stop>.h5``: with a Dask scheduler (``run.scheduler``), the
   finished shards of tracers, merged into the case files (:mod:`rimcl.study.distributed`);
 - ``stats.json`` and ``figures/``: statistics and figures of all cases (:mod:`rimcl.stats.document`,
@@ -361,8 +362,9 @@ def run_study(
     study = scene if isinstance(scene, StudyConfig) else StudyConfig.from_scene(scene)
     mode = study.run.mode
     all_cases = study_cases(study)
-    cases = all_cases if mode != "piv" else []
-    _check_resources(study)
+    cases = all_cases if mode in ("ptv", "both") else []
+    if mode != "lpt":  # the LPT stage checks its own rig and flow
+        _check_resources(study)
     _check_no_links(out_dir)
     if mode != "ptv":
         from rimcl.piv.render import check_piv_scene
@@ -387,6 +389,16 @@ def run_study(
         if all_cases[0][0] == DELTA_N_CASE:
             say(f"{study.field_path} stores delta_n: one case, its own index")
         scene_file = _SceneFile(out_dir, study)
+        if mode == "lpt":
+            from rimcl.lpt.study import run_lpt_study
+
+            scene_file.settle()
+            # the LPT stage parses its own sections ([rig], [illumination], [lpt]) of the record
+            stats, ran = run_lpt_study(
+                study.scene_record(), out_dir, force=force, figures=figures, report=say
+            )
+            elapsed = time.perf_counter() - started
+            return StudyResult(out_dir, stats, ran, [], {}, True, elapsed)
         ran, skipped, seconds = [], [], {}
         todo = cases
         if scheduler and cases:
