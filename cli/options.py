@@ -215,11 +215,16 @@ def scene_options(func):
     return click.argument("scene_file", required=False, type=click.Path(dir_okay=False))(func)
 
 
-def command_scene(scene_file, scene_option, overrides, preset=None):
+def command_scene(scene_file, scene_option, overrides, preset=None, velocity=True):
     """The checked scene of a command: its scene file (or the default scene) with the
-    command's options on top (``{"section.key": value}``; None: not given)."""
+    command's options on top (``{"section.key": value}``; None: not given).
+
+    ``velocity``: the command moves tracers, so a sheet moved inside the shipped sample
+    runs on its flow with full velocity (:func:`rimcl.scene.command.place_sheet`, said in
+    one line when it is generated)."""
     from pathlib import Path
 
+    from rimcl.scene.command import place_sheet
     from rimcl.scene.load import load_scene
 
     if scene_file and scene_option and Path(scene_file).resolve() != Path(scene_option).resolve():
@@ -229,4 +234,5 @@ def command_scene(scene_file, scene_option, overrides, preset=None):
     if field_path:
         # a field named on the command line is relative to where the command runs
         overrides["field.path"] = str(Path(field_path).resolve())
-    return load_scene(scene_file or scene_option, overrides, preset=preset)
+    scene = load_scene(scene_file or scene_option, overrides, preset=preset)
+    return place_sheet(scene, report=click.echo) if velocity else scene
