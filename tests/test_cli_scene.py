@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import tifffile
 from click.testing import CliRunner
+from test_cli_render import _periodic_box
 
 from rimcl.cli.main import cli
 from rimcl.scene.config import DEFAULT_PSF_SIGMA
 from rimcl.scene.keys import default_scene
 from rimcl.scene.load import default_scene_text
-from test_cli_render import _periodic_box
 
 # a plane camera named: the tests check the other keys' defaults, whatever the camera's is
 SCENE = """

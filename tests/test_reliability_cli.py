@@ -246,8 +246,8 @@ def test_a_delta_n_file_traces_as_its_density_twin(device, twin_files, tmp_path)
 def test_a_delta_n_file_renders_and_benchmarks(device, twin_files, tmp_path):
     _, delta_path = twin_files
     output = tmp_path / "render.h5"
-    result = run("render", "--field", delta_path, "--tracers", 4, "--fan", 4, "--pixels", 128, "--frames", 3,
-                 "--device", device.name, "-o", output)  # fmt: skip
+    result = run("render", "--field", delta_path, "--tracers", 4, "--fan", 4, "--pixels", 128,
+                 "--frames", 3, "--device", device.name, "-o", output)  # fmt: skip
     assert result.exit_code == 0, result.output
     with h5py.File(output, "r") as h5:
         assert h5.attrs["case"] == "delta_n" and np.isnan(h5.attrs["k_rho"])
