@@ -79,30 +79,16 @@ field_option = click.option(
     help="rimcl field file (default: the shipped sample).",
 )
 case_option = click.option(
-    "--case", default=None, help="Gladstone–Dale case C0..C4 (default C1, air)."
+    "--case",
+    default=None,
+    help="The case: C0..C4, G=<value>, dT=<K>, dS=<g/kg> [default: the scene's first case "
+    "other than C0, C1 (air) in the default scene].",
 )
 k_rho_option = click.option(
     "--k-rho", type=NON_NEGATIVE, default=None, help="Custom Gladstone–Dale product G = Kρ."
 )
-seed_option = click.option(
-    "--seed", type=INDEX, default=0, show_default=True, help="Random seed (tracers, rays)."
-)
 overwrite_option = click.option(
     "--overwrite", is_flag=True, help="Replace an existing output file."
-)
-interp_option = click.option(
-    "--interp",
-    type=click.Choice(["trilinear", "texture", "bspline3", "auto"]),
-    default="trilinear",
-    show_default=True,
-    help="Interpolation of the gridded field.",
-)
-precision_option = click.option(
-    "--precision",
-    type=click.Choice(["f32", "f32c", "f64"]),
-    default="f32c",
-    show_default=True,
-    help="Accumulation precision: plain float32, compensated float32, float64.",
 )
 step_option = click.option(
     "--step",
@@ -195,3 +181,58 @@ def handle_errors(func):
         return run_reporting_errors(click.get_current_context(), lambda: func(*args, **kwargs))
 
     return wrapper
+
+
+def _print_default_scene(ctx, _param, value):
+    if not value or ctx.resilient_parsing:
+        return
+    from rimcl.scene.load import default_scene_text
+
+    click.echo(default_scene_text(), nl=False)
+    ctx.exit()
+
+
+def scene_options(func):
+    """``SCENE_FILE`` (or ``--scene``) and ``--print-default-scene``: every command that
+    measures starts from the same scene (:mod:`rimcl.scene.keys`); its options override
+    the scene's keys."""
+    func = click.option(
+        "--print-default-scene",
+        is_flag=True,
+        is_eager=True,
+        expose_value=False,
+        callback=_print_default_scene,
+        help="Print the default scene (every key, documented; the same for every command) "
+        "and exit.",
+    )(func)
+    func = click.option(
+        "--scene",
+        "scene_option",
+        type=click.Path(dir_okay=False),
+        default=None,
+        help="Scene file (TOML), the same as SCENE_FILE.",
+    )(func)
+    return click.argument("scene_file", required=False, type=click.Path(dir_okay=False))(func)
+
+
+def command_scene(scene_file, scene_option, overrides, preset=None, velocity=True):
+    """The checked scene of a command: its scene file (or the default scene) with the
+    command's options on top (``{"section.key": value}``; None: not given).
+
+    ``velocity``: the command moves tracers, so a sheet moved inside the shipped sample
+    runs on its flow with full velocity (:func:`rimcl.scene.command.place_sheet`, said in
+    one line when it is generated)."""
+    from pathlib import Path
+
+    from rimcl.scene.command import place_sheet
+    from rimcl.scene.load import load_scene
+
+    if scene_file and scene_option and Path(scene_file).resolve() != Path(scene_option).resolve():
+        raise click.UsageError("give one scene file: SCENE_FILE or --scene, not both")
+    overrides = dict(overrides)
+    field_path = overrides.get("field.path")
+    if field_path:
+        # a field named on the command line is relative to where the command runs
+        overrides["field.path"] = str(Path(field_path).resolve())
+    scene = load_scene(scene_file or scene_option, overrides, preset=preset)
+    return place_sheet(scene, report=click.echo) if velocity else scene

@@ -10,14 +10,14 @@ from rimcl.cli.options import (
     NON_NEGATIVE,
     POSITIVE,
     case_option,
+    command_scene,
     device_option,
     field_option,
     handle_errors,
     k_rho_option,
     overwrite_option,
     parse_step,
-    precision_option,
-    seed_option,
+    scene_options,
     step_option,
 )
 from rimcl.study.summary import number
@@ -139,34 +139,54 @@ def analyze(
     click.echo(f"wrote {output}")
 
 
+#: ``rimcl piv render`` option -> scene key it overrides (the rest are the command's own)
+RENDER_SCENE_KEYS = {
+    "field_path": "field.path",
+    "length_m": "field.length_m",
+    "time_s": "field.time_s",
+    "start_frame": "field.start_frame",
+    "x_sheet": "field.x_sheet",
+    "pixels": "piv.pixels",
+    "density": "piv.density",
+    "diameter": "piv.diameter",
+    "sheet_thickness": "piv.sheet_thickness",
+    "bit_depth": "piv.bit_depth",
+    "rays": "piv.rays",
+    "dt": "piv.dt",
+    "window": "piv.window",
+    "overlap": "piv.overlap",
+    "passes": "piv.passes",
+    "camera": "camera.kind",
+    "aperture_diameter": "camera.aperture_diameter",
+    "focal_length": "camera.focal_length",
+    "f_number": "camera.f_number",
+    "camera_distance": "camera.distance",
+    "view_angle": "camera.view_angle",
+    "interp": "integrator.interp",
+    "precision": "integrator.precision",
+    "device_spec": "run.device",
+    "seed": "tracers.seed",
+}
+
+
 @piv.command()
+@scene_options
 @field_option
 @case_option
 @k_rho_option
+@click.option("--pixels", type=COUNT, help="Pixels across the field of view [piv.pixels].")
 @click.option(
-    "--pixels", type=COUNT, default=512, show_default=True, help="Pixels across the field of view."
+    "--density", type=POSITIVE, help="Particle images per pixel in the sheet [piv.density]."
 )
 @click.option(
-    "--density",
-    type=POSITIVE,
-    default=0.03,
-    show_default=True,
-    help="Particle images per pixel in the sheet.",
-)
-@click.option(
-    "--diameter",
-    type=POSITIVE,
-    default=3.0,
-    show_default=True,
-    help="Particle image diameter d = 4σ (px).",
+    "--diameter", type=POSITIVE, help="Particle image diameter d = 4σ, px [piv.diameter]."
 )
 @click.option(
     "--sheet-thickness",
     type=POSITIVE,
-    default=None,
-    help="Light sheet 1/e² thickness (field length units) [default: 8 pixels].",
+    help="Light sheet 1/e² thickness, field length units [piv.sheet_thickness].",
 )
-@click.option("--bit-depth", type=click.IntRange(8, 16), default=16, show_default=True)
+@click.option("--bit-depth", type=click.IntRange(8, 16), help="Bits per pixel [piv.bit_depth].")
 @click.option(
     "--peak-fraction",
     type=POSITIVE,
@@ -176,44 +196,51 @@ def analyze(
 )
 @click.option(
     "--camera",
-    type=click.Choice(["plane", "pupil"]),
-    default="plane",
-    show_default=True,
-    help="plane: M×M rays to the exit plane (the paper); pupil: rays over a lens aperture.",
+    type=click.Choice(["plane", "pupil", "lens"]),
+    help="plane: rays to the exit plane (the paper); pupil: rays over an aperture; lens: a "
+    "real lens in physical units (needs field.length_m) [camera.kind].",
 )
-@click.option("--fan", type=COUNT, default=8, show_default=True, help="M of the plane camera.")
 @click.option(
-    "--pupil-rays", type=COUNT, default=64, show_default=True, help="Rays per tracer (pupil)."
+    "--rays",
+    type=COUNT,
+    help="Rays per tracer (a plane camera: a fan of round(√rays) per side) [piv.rays].",
 )
-@click.option("--aperture-diameter", type=POSITIVE, default=None, help="Pupil diameter.")
-@click.option("--focal-length", type=POSITIVE, default=None, help="With --f-number: D = F / N.")
-@click.option("--f-number", type=POSITIVE, default=None, help="With --focal-length: D = F / N.")
-@click.option("--camera-distance", type=POSITIVE, default=None, help="Sheet to pupil [4 L1].")
-@click.option("--view-angle", type=FINITE, default=0.0, show_default=True, help="Degrees.")
+@click.option("--fan", type=COUNT, help="Plane camera: M×M rays per tracer (--rays M²).")
+@click.option("--pupil-rays", type=COUNT, help="Pupil or lens camera: rays per tracer (--rays).")
 @click.option(
-    "--start-frame", type=INDEX, default=0, show_default=True, help="Field frame of exposure A."
+    "--aperture-diameter", type=POSITIVE, help="Pupil diameter [camera.aperture_diameter]."
 )
+@click.option("--focal-length", type=POSITIVE, help="With --f-number: D = F / N.")
+@click.option("--f-number", type=POSITIVE, help="With --focal-length: D = F / N [camera.f_number].")
+@click.option("--camera-distance", type=POSITIVE, help="Sheet to pupil [camera.distance].")
+@click.option("--view-angle", type=FINITE, help="Degrees [camera.view_angle].")
+@click.option("--length-m", type=POSITIVE, help="Metres per field length unit [field.length_m].")
+@click.option("--time-s", type=POSITIVE, help="Seconds per field time unit [field.time_s].")
+@click.option("--start-frame", type=INDEX, help="Field frame of exposure A [field.start_frame].")
 @click.option(
     "--dt",
     type=POSITIVE,
-    default=0.1,
-    show_default=True,
-    help="Time between exposures (0.1 on the sample: 1.5 px rms at 512 px).",
+    help="Time between exposures (0.1 on the sample: 1.5 px rms at 512 px) [piv.dt].",
 )
-@click.option("--x-sheet", type=FINITE, default=None, help="Sheet centre x1 [default: scene].")
-@window_option
-@overlap_option
+@click.option("--x-sheet", type=FINITE, help="Sheet centre x1 [field.x_sheet].")
+@click.option(
+    "--window", type=COUNT, help="Interrogation window of the last pass, px [piv.window]."
+)
+@click.option("--overlap", type=NON_NEGATIVE, help="Window overlap, fraction [piv.overlap].")
+@click.option("--passes", type=COUNT, help="Correlation passes [piv.passes].")
 @click.option(
     "--interp",
     type=click.Choice(["trilinear", "texture", "bspline3"]),
-    default="trilinear",
-    show_default=True,
-    help="Interpolation of the gridded field.",
+    help="Interpolation of the gridded field [integrator.interp].",
 )
-@precision_option
+@click.option(
+    "--precision",
+    type=click.Choice(["f32", "f32c", "f64"]),
+    help="Accumulation precision [integrator.precision].",
+)
 @step_option
 @device_option
-@seed_option
+@click.option("--seed", type=INDEX, help="Random seed of the tracers [tracers.seed].")
 @click.option(
     "-o",
     "--output",
@@ -225,89 +252,56 @@ def analyze(
 @overwrite_option
 @handle_errors
 def render(
-    field_path,
-    case,
-    k_rho,
-    pixels,
-    density,
-    diameter,
-    sheet_thickness,
-    bit_depth,
-    peak_fraction,
-    camera,
-    fan,
-    pupil_rays,
-    aperture_diameter,
-    focal_length,
-    f_number,
-    camera_distance,
-    view_angle,
-    start_frame,
-    dt,
-    x_sheet,
-    window,
-    overlap,
-    interp,
-    precision,
-    step,
-    device_spec,
-    seed,
-    prefix,
-    overwrite,
+    scene_file, scene_option, case, k_rho, peak_fraction, step, prefix, overwrite, **options
 ):
-    """PIV frame pairs through the field and through a uniform medium, with the truth.
+    """PIV frame pairs of one case from a scene (SCENE_FILE, default: the default scene),
+    through the field and through a uniform medium, with the truth.
 
-    The truth file holds every tracer's positions at both exposures and the true
-    displacement averaged over the interrogation windows of --window/--overlap.
+    Options override the scene's keys (named in brackets): the [piv] section, the field,
+    camera, integrator and seed the PTV cases of a study use too. The case is --case, else
+    the scene's first case other than C0 (the default scene: C1, air). The truth file
+    holds every tracer's positions at both exposures and the true displacement averaged
+    over the interrogation windows.
 
     \b
     Examples:
       rimcl piv render --case C1 -o air          # air_field_A.tif ... air_truth.h5
-      rimcl piv render --case C4 --camera pupil --pupil-rays 32 -o water
+      rimcl piv render scene.toml --case C4 -o water
       rimcl piv analyze water_field_A.tif water_field_B.tif -o water_vectors.h5
     """
-    from rimcl.fields.field_loading import case_arguments
-    from rimcl.piv.analysis import PivSettings
-    from rimcl.piv.imaging_config import PivImaging
-    from rimcl.piv.render import PivConfig, run_piv_render
+    import dataclasses
+
+    from rimcl.piv.render import run_piv_render
+    from rimcl.piv.study import configs_from_study
     from rimcl.piv.truth import check_outputs, write_piv_render
-    from rimcl.scene.config import CameraConfig, IntegratorConfig, RunConfig
+    from rimcl.scene.command import command_case
+    from rimcl.scene.study_config import StudyConfig
 
     check_outputs(prefix, overwrite)
-    piv_config = PivConfig(
-        imaging=PivImaging(
-            pixels=pixels,
-            density=density,
-            diameter=diameter,
-            sheet_thickness=sheet_thickness,
-            bit_depth=bit_depth,
-            peak_fraction=peak_fraction,
-        ),
-        settings=PivSettings(window=window, overlap=overlap),
-        dt=dt,
-        start_frame=start_frame,
-        x_sheet=x_sheet,
-        seed=seed,
+    fan, pupil_rays = options.pop("fan"), options.pop("pupil_rays")
+    given = [
+        name
+        for name, v in (("--rays", options["rays"]), ("--fan", fan), ("--pupil-rays", pupil_rays))
+        if v is not None
+    ]
+    if len(given) > 1:
+        raise click.UsageError(f"{' and '.join(given)} both set the rays per tracer: give one")
+    if fan is not None or pupil_rays is not None:
+        options["rays"] = fan**2 if fan is not None else pupil_rays
+    overrides = {RENDER_SCENE_KEYS[name]: value for name, value in options.items()}
+    parsed_step = parse_step(step)
+    if isinstance(parsed_step, float):
+        overrides["integrator.step"] = parsed_step
+    scene = command_scene(scene_file, scene_option, overrides)
+    case, k_rho = command_case(scene, case, k_rho)
+    piv_config, configs = configs_from_study(StudyConfig.from_scene(scene))
+    piv_config = dataclasses.replace(
+        piv_config, imaging=dataclasses.replace(piv_config.imaging, peak_fraction=peak_fraction)
     )
-    camera_config = CameraConfig(
-        kind=camera,
-        fan=fan,
-        pupil_rays=pupil_rays,
-        aperture_diameter=aperture_diameter,
-        focal_length=focal_length,
-        f_number=f_number,
-        distance=camera_distance,
-        view_angle=view_angle,
-    )
-    case, k_rho = case_arguments(field_path, case, k_rho)
+    if isinstance(parsed_step, str):
+        configs["integrator"] = dataclasses.replace(configs["integrator"], step=parsed_step)
     result = run_piv_render(
-        field_path,
-        case=case,
-        k_rho=k_rho,
-        piv=piv_config,
-        camera=camera_config,
-        integrator=IntegratorConfig(interp=interp, precision=precision, step=parse_step(step)),
-        run=RunConfig(device=device_spec),
+        scene["field"]["path"] or None, case=case, k_rho=k_rho, piv=piv_config, **configs
     )
     paths = write_piv_render(prefix, result, overwrite=overwrite)
     truth = result.reference.truth
@@ -318,7 +312,8 @@ def render(
     )
     rms = [np.sqrt(np.nanmean(truth[name] ** 2)) for name in ("dx", "dy")]
     click.echo(
-        f"true displacement over {window} px windows: rms dx {rms[0]:.3g} px, dy {rms[1]:.3g} px"
+        f"true displacement over {piv_config.settings.window} px windows: rms dx {rms[0]:.3g} px, "
+        f"dy {rms[1]:.3g} px"
     )
     click.echo(f"rays through the field: {result.field.ray_counts}")
     click.echo(f"motion: {result.motion}")

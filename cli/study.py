@@ -9,9 +9,11 @@ from rimcl.cli.options import (
     INDEX,
     NON_NEGATIVE,
     POSITIVE,
+    command_scene,
     device_option,
     engine_option,
     handle_errors,
+    scene_options,
 )
 from rimcl.cli.piv import echo_piv_case_lines
 from rimcl.cli.stats import echo_case_lines
@@ -27,18 +29,13 @@ def _case_list(_ctx, _param, value):
 
 
 @click.command()
-@click.argument("scene_file", required=False, type=click.Path(dir_okay=False))
+@scene_options
 @click.option(
     "-o",
     "--out",
     "out_dir",
     type=click.Path(file_okay=False),
     help="Study directory (created if missing; a rerun resumes it).",
-)
-@click.option(
-    "--print-default-scene",
-    is_flag=True,
-    help="Print the default scene (every key, documented) and exit.",
 )
 @click.option(
     "--preset",
@@ -91,8 +88,8 @@ def _case_list(_ctx, _param, value):
 @handle_errors
 def study(
     scene_file,
+    scene_option,
     out_dir,
-    print_default_scene,
     preset,
     engine,
     mode,
@@ -121,17 +118,13 @@ def study(
     stats.json, figures/ and summary.md. A rerun skips finished cases; --force redoes
     all. Options override the scene's keys (named in brackets).
     """
-    from rimcl.scene.load import default_scene_text, load_scene
     from rimcl.scene.study_config import StudyConfig
     from rimcl.study.run import run_study
 
-    if print_default_scene:
-        click.echo(default_scene_text(), nl=False)
-        return
     if out_dir is None:
         raise click.UsageError("give the study directory with --out DIR")
     overrides = {
-        "field.path": str(Path(field_path).resolve()) if field_path else None,
+        "field.path": field_path,
         "cases.names": cases,
         "tracers.count": tracers,
         "tracers.seed": seed,
@@ -147,7 +140,9 @@ def study(
         "run.mode": mode,
         "run.scheduler": scheduler,
     }
-    study = StudyConfig.from_scene(load_scene(scene_file, overrides, preset=preset))
+    study = StudyConfig.from_scene(
+        command_scene(scene_file, scene_option, overrides, preset=preset)
+    )
     if study.run.mode == "piv":
         ignored = [
             option

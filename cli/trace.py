@@ -11,15 +11,14 @@ from rimcl.cli.options import (
     MAX_STEPS_LIMIT,
     POSITIVE,
     case_option,
+    command_scene,
     device_option,
     field_option,
     handle_errors,
-    interp_option,
     k_rho_option,
     overwrite_option,
     parse_step,
-    precision_option,
-    seed_option,
+    scene_options,
     step_option,
     tolerance_option,
 )
@@ -27,9 +26,23 @@ from rimcl.cli.options import (
 ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
 
 
+#: ``rimcl trace`` option -> scene key it overrides (the rest are the command's own)
+SCENE_KEYS = {
+    "field_path": "field.path",
+    "frame": "field.start_frame",
+    "length": "field.depth",
+    "tracers": "tracers.count",
+    "fan": "camera.fan",
+    "precision": "integrator.precision",
+    "device_spec": "run.device",
+    "seed": "tracers.seed",
+}
+
+
 @click.command()
+@scene_options
 @field_option
-@click.option("--frame", type=INDEX, default=0, show_default=True, help="Frame of the field file.")
+@click.option("--frame", type=INDEX, help="Frame of the field file [field.start_frame].")
 @case_option
 @k_rho_option
 @click.option(
@@ -41,15 +54,11 @@ ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
 @click.option(
     "--length",
     type=POSITIVE,
-    default=None,
-    help="Depth L1 of the traced slab (default: the field's depth; π for --analytic).",
+    help="Depth L1 of the traced slab (default: the field's depth; π for --analytic) "
+    "[field.depth].",
 )
-@click.option(
-    "--tracers", type=COUNT, default=10, show_default=True, help="Random tracers in the sheet."
-)
-@click.option(
-    "--fan", type=COUNT, default=32, show_default=True, help="M: each tracer sends M×M rays."
-)
+@click.option("--tracers", type=COUNT, help="Random tracers in the sheet [tracers.count].")
+@click.option("--fan", type=COUNT, help="M: each tracer sends M×M rays [camera.fan].")
 @click.option(
     "--rays",
     "rays_path",
@@ -57,8 +66,16 @@ ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
     default=None,
     help="Trace these rays instead (.npz/.h5 with origins, directions; or CSV x1..d3).",
 )
-@interp_option
-@precision_option
+@click.option(
+    "--interp",
+    type=click.Choice(["trilinear", "texture", "bspline3", "auto"]),
+    help="Interpolation of the gridded field; auto: chosen by --tolerance [integrator.interp].",
+)
+@click.option(
+    "--precision",
+    type=click.Choice(["f32", "f32c", "f64"]),
+    help="Accumulation precision [integrator.precision].",
+)
 @step_option
 @tolerance_option
 @click.option(
@@ -68,7 +85,7 @@ ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
     help="Stop rays after this many steps.",
 )
 @device_option
-@seed_option
+@click.option("--seed", type=INDEX, help="Random seed of the tracers [tracers.seed].")
 @click.option(
     "-o",
     "--output",
@@ -80,48 +97,63 @@ ANALYTIC_NAMES = ("uniform", "grin", "fisheye", "linear")
 @overwrite_option
 @handle_errors
 def trace(
-    field_path,
-    frame,
+    scene_file,
+    scene_option,
     case,
     k_rho,
     analytic,
-    length,
-    tracers,
-    fan,
     rays_path,
     interp,
-    precision,
     step,
     tolerance,
     max_steps,
-    device_spec,
-    seed,
     output,
     overwrite,
+    **options,
 ):
     """Trace rays through a refractive-index field to the exit plane and write every
     ray's image point, exit state, deflection, path length and status.
 
+    The field, sheet, depth, tracers, fan and integrator come from the scene (SCENE_FILE,
+    default: the default scene); options override its keys (named in brackets). The case
+    is --case, else the scene's first case other than C0 (the default scene: C1, air).
+
     \b
     Examples:
       rimcl trace --tracers 20 --fan 32 -o air.h5            # shipped sample, case C1
-      rimcl trace --case C4 --precision f64 -o water.h5
+      rimcl trace scene.toml --case C4 --precision f64 -o water.h5
       rimcl trace --analytic grin --length 100 --fan 8 -o grin.h5
     """
     from rimcl.core.device import describe_device, select_device
     from rimcl.core.memory import check_field_upload, check_trace_memory
     from rimcl.core.provenance import check_output
     from rimcl.fields.field import Field, analytic_field
-    from rimcl.fields.field_loading import case_arguments, load_field
+    from rimcl.fields.field_loading import load_field
     from rimcl.optics.rays import fan_rays, read_rays, scene_for, write_trace
     from rimcl.optics.tracing import trace_rays
+    from rimcl.scene.command import command_case
 
     check_output(output, overwrite)
+    overrides = {SCENE_KEYS[name]: value for name, value in options.items()}
+    parsed_step = parse_step(step)
+    if isinstance(parsed_step, float):
+        overrides["integrator.step"] = parsed_step
+    if interp not in (None, "auto"):
+        overrides["integrator.interp"] = interp
+    scene_table = command_scene(scene_file, scene_option, overrides, velocity=False)
+    field_keys, integrator = scene_table["field"], scene_table["integrator"]
+    frame, length = field_keys["start_frame"], field_keys["depth"]
+    tracers, seed = scene_table["tracers"]["count"], scene_table["tracers"]["seed"]
+    fan, device_spec = scene_table["camera"]["fan"], scene_table["run"]["device"] or None
+    interp = "auto" if interp == "auto" else integrator["interp"]
+    precision = integrator["precision"]
+    step = parsed_step if isinstance(parsed_step, str) else integrator["step"]
+    field_path = field_keys["path"] or None
     if analytic is not None:
         field = analytic_field(analytic)
         source = {"analytic": analytic, "params": field.params}
     else:
-        case, k_rho = case_arguments(field_path, case, k_rho)
+        case, k_rho = command_case(scene_table, case, k_rho)
         field = load_field(field_path, frame=frame, case=case, k_rho=k_rho)
         source = {
             "field": field_path or "shipped sample",
@@ -129,7 +161,7 @@ def trace(
             "case": field.attrs.get("case", "delta_n"),
             "k_rho": field.attrs.get("k_rho"),
         }
-    scene = scene_for(field, length)
+    scene = scene_for(field, length, x_sheet=field_keys["x_sheet"])
     tracer_id = None
     if rays_path is not None:
         origins, directions = read_rays(rays_path)
@@ -145,7 +177,7 @@ def trace(
         origins,
         directions,
         x_end=scene.x_end,
-        step=parse_step(step),
+        step=step,
         interp=interp,
         precision=precision,
         device=device,

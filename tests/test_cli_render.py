@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from rimcl.cli.main import cli
 from rimcl.fields.field_writer import write_field
 
-QUICK = ["--tracers", "4", "--fan", "4", "--pixels", "1024"]
+QUICK = ["--tracers", "4", "--fan", "4", "--pixels", "1024", "--frames", "3"]
 
 
 def _periodic_box(path, with_velocity=True):

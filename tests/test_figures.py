@@ -296,3 +296,27 @@ def test_dt_sweep_finds_where_refraction_dominates(study, tmp_path):
     written = write_dt_sweep_figure(sweep, tmp_path / "sweep")
     assert (tmp_path / "sweep" / "dt_sweep.png").exists()
     assert written["dt"] == [0.005, 0.02, 0.08]
+
+
+def test_position_error_axes_carry_micrometres_where_the_scene_gives_the_size(study):
+    import dataclasses
+
+    tables, stats, _ = study
+
+    def micrometre_axes(all_tables):
+        figure, _ = draw_figure("position_error", all_tables, stats)
+        return [
+            child
+            for ax in figure.axes
+            for child in ax.child_axes
+            if "µm" in (child.get_xlabel() + child.get_ylabel())
+        ]
+
+    assert micrometre_axes(tables) == []  # field units only: no physical axis
+    scaled = [dataclasses.replace(t, length_m=0.01) for t in tables]
+    pdf_axis, peak_axis = micrometre_axes(scaled)
+    # |ε_x| / L = 1e-3 is 1e-3 of L field units of 1 cm each, in µm, on both axes
+    for axis in (pdf_axis, peak_axis):
+        forward, inverse = axis._functions
+        assert forward(1e-3) == pytest.approx(1e-3 * tables[0].length * 0.01 * 1e6)
+        assert inverse(forward(2e-4)) == pytest.approx(2e-4)

@@ -29,11 +29,13 @@ def analytic_scene(length):
     return Scene(0.0, float(length), np.array([-half, -half]), np.array([half, half]), False)
 
 
-def scene_for(field, length=None):
-    """Default scene of a gridded or closed-form field."""
+def scene_for(field, length=None, x_sheet=None):
+    """Default scene of a gridded or closed-form field (a closed-form one: sheet at 0)."""
     if isinstance(field, AnalyticField):
         return analytic_scene(np.pi if length is None else length)
-    return Scene.from_grid(field.origin, field.spacing, field.shape, field.boundary, depth=length)
+    return Scene.from_grid(
+        field.origin, field.spacing, field.shape, field.boundary, x_sheet=x_sheet, depth=length
+    )
 
 
 def fan_rays(scene, tracers, fan, seed):

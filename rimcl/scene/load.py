@@ -55,7 +55,8 @@ def default_scene_text():
     str
     """
     lines = [
-        "# rimcl study scene. Every key is optional: a missing key takes the value shown.",
+        "# rimcl scene (study, render, piv render, trace). Every key is optional: a missing",
+        "# key takes the value shown; command-line options override keys.",
         "# Lengths are in field length units (the field file's grid), angles in degrees.",
         "# Keys commented out default to what the pipeline decides (see their comment).",
     ]

@@ -81,6 +81,28 @@ def ticks_at(axis, values):
     axis.set_minor_locator(NullLocator())
 
 
+def physical_axis(ax, which, factor, label):
+    """A second axis in physical units (the plotted values times ``factor``), where the
+    scene gives the scale; nothing without it (``factor`` None).
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+    which : {"x", "y"}
+        ``x``: an axis on top; ``y``: one on the right.
+    factor : float or None
+        Physical units per plotted unit (e.g. µm per L).
+    label : str
+    """
+    if factor is None:
+        return
+    functions = (lambda value: value * factor, lambda value: value / factor)
+    if which == "x":
+        ax.secondary_xaxis("top", functions=functions).set_xlabel(label)
+    else:
+        ax.secondary_yaxis("right", functions=functions).set_ylabel(label)
+
+
 def figure_title(figure, text, fontsize=9):
     """The figure's title, wrapped to its width (no explicit line breaks needed)."""
     characters = max(30, int(figure.get_figwidth() * 72.0 * 0.95 / (0.55 * fontsize)))

@@ -16,6 +16,7 @@ from rimcl.stats.figures_common import (
     new_figure,
     panel_title,
     pdf_series,
+    physical_axis,
     relative_errors,
     statistic_against_g,
 )
@@ -61,6 +62,14 @@ def draw_position_error(all_tables, cases):
     ax_pdf.set_ylabel("PDF of log10(|ε_x| / L)")
     ax_pdf.grid(True, which="major", alpha=0.3)
     ax_pdf.legend(fontsize=6, title="dots: PDF peaks", title_fontsize=6)
+    # µm per L where the scene gives the field's size (field.length_m); every case one field
+    first = all_tables[0] if all_tables else None
+    um_per_l = (
+        first.length * first.length_m * 1e6
+        if first is not None and first.length_m is not None
+        else None
+    )
+    physical_axis(ax_pdf, "x", um_per_l, "|ε_x| (µm)")
     panel_title(ax_pdf, "a", "PDF of the position error, per case")
 
     def position(key):
@@ -95,6 +104,7 @@ def draw_position_error(all_tables, cases):
         ratio = float(np.median(ratios))
         top = ax_peak.secondary_xaxis("top", functions=(lambda g: g * ratio, lambda d: d / ratio))
         top.set_xlabel("Δn_max")
+    physical_axis(ax_peak, "y", um_per_l, "|ε_x| (µm)")
     panel_title(ax_peak, "b", "peak and median against G")
     return figure, {"panels": {"a": {"series": series}, "b": data}}
 
