@@ -191,7 +191,8 @@ def test_the_render_file_page_names_every_table_column_and_attribute(device, tmp
     """A render file holds exactly the groups, columns and root attributes its page lists."""
     import h5py
 
-    from rimcl.ptv.measure import run_render, write_render
+    from rimcl.ptv.measure import run_render
+    from rimcl.ptv.render_file import write_render
     from rimcl.scene.config import (
         CameraConfig,
         MeasureConfig,
