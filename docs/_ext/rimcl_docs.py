@@ -49,9 +49,21 @@ def scene_keys_markdown():
             meaning = key.doc
             if key.choices:
                 meaning += " (one of: " + ", ".join(f"`{c}`" for c in key.choices) + ")"
+            meaning += _limit(key)
             lines.append(f"| `{key.dotted}` | {_cell(_default(key))} | {_cell(meaning)} |")
         lines.append("")
     return "\n".join(lines)
+
+
+def _limit(key):
+    """The range the scene loader enforces on a number, where the meaning does not say it."""
+    if ">=" in key.doc or "at least" in key.doc:
+        return ""
+    if key.minimum is not None:
+        return f"; at least {key.minimum:g}"
+    if key.positive:
+        return "; positive"
+    return ""
 
 
 def _anchor(section):
