@@ -15,7 +15,7 @@ from rimcl.fields.field import Field
 from rimcl.fields.field_writer import write_field
 from rimcl.optics.camera import PupilCamera, Scene
 from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair
-from rimcl.piv.frame_pair import image_pair
+from rimcl.piv.frame_pair import image_frames
 from rimcl.piv.imaging_config import PivImaging, seed_particles, sheet_intensity
 from rimcl.piv.render import PivConfig, run_piv_render
 from rimcl.piv.study import load_piv_case, run_piv_case, write_piv_case
@@ -94,9 +94,11 @@ def test_growing_transverse_gradient_matches_the_closed_form(device):
     positions = np.stack([start, start + np.array([0.0, 0.4, 0.25]) * pixel])
     fields = (_slab(g_a, n0, counts, lo, spacing), _slab(g_b, n0, counts, lo, spacing))
     options = {"device": device}
-    through = image_pair(fields, positions, scene, camera, imaging, trace_options=options)
+    through = image_frames(fields, positions, scene, camera, imaging, trace_options=options)
     uniform = uniform_like(fields[0])
-    plain = image_pair((uniform, uniform), positions, scene, camera, imaging, trace_options=options)
+    plain = image_frames(
+        (uniform, uniform), positions, scene, camera, imaging, trace_options=options
+    )
     measured = analyze_pair(*through.images)
     reference = analyze_pair(*plain.images)
     x2 = measured.x * pixel
