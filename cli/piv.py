@@ -11,6 +11,7 @@ from rimcl.cli.options import (
     POSITIVE,
     case_option,
     device_option,
+    engine_option,
     field_option,
     handle_errors,
     k_rho_option,
@@ -198,6 +199,26 @@ def analyze(
     help="Time between exposures (0.1 on the sample: 1.5 px rms at 512 px).",
 )
 @click.option("--x-sheet", type=FINITE, default=None, help="Sheet centre x1 [default: scene].")
+@click.option(
+    "--scaling",
+    type=click.Choice(["fixed", "per_image"]),
+    default="fixed",
+    show_default=True,
+    help="fixed: one scale for all frames; per_image: each frame's brightest pixel at the peak.",
+)
+@click.option("--noise", is_flag=True, help="Sensor noise: shot, read noise, background, well.")
+@click.option(
+    "--peak-electrons",
+    type=POSITIVE,
+    default=10000.0,
+    show_default=True,
+    help="With --noise: mean e- at an in-focus particle's peak.",
+)
+@click.option(
+    "--background-e", type=FINITE, default=0.0, show_default=True, help="With --noise: e-/px."
+)
+@click.option("--mie", is_flag=True, help="Weigh each ray by its Mie intensity (10 µm in air).")
+@engine_option
 @window_option
 @overlap_option
 @click.option(
@@ -242,6 +263,12 @@ def render(
     start_frame,
     dt,
     x_sheet,
+    scaling,
+    noise,
+    peak_electrons,
+    background_e,
+    mie,
+    engine,
     window,
     overlap,
     interp,
@@ -268,7 +295,13 @@ def render(
     from rimcl.piv.imaging_config import PivImaging
     from rimcl.piv.render import PivConfig, run_piv_render
     from rimcl.piv.truth import check_outputs, write_piv_render
-    from rimcl.scene.config import CameraConfig, IntegratorConfig, RunConfig
+    from rimcl.scene.config import (
+        CameraConfig,
+        IntegratorConfig,
+        MieConfig,
+        RunConfig,
+        SensorConfig,
+    )
 
     check_outputs(prefix, overwrite)
     piv_config = PivConfig(
@@ -279,6 +312,7 @@ def render(
             sheet_thickness=sheet_thickness,
             bit_depth=bit_depth,
             peak_fraction=peak_fraction,
+            scaling=scaling,
         ),
         settings=PivSettings(window=window, overlap=overlap),
         dt=dt,
@@ -304,7 +338,10 @@ def render(
         piv=piv_config,
         camera=camera_config,
         integrator=IntegratorConfig(interp=interp, precision=precision, step=parse_step(step)),
-        run=RunConfig(device=device_spec),
+        run=RunConfig(device=device_spec, **({} if engine is None else {"engine": engine})),
+        sensor=SensorConfig(noise=noise, peak_electrons=peak_electrons, background_e=background_e),
+        mie=MieConfig(enabled=mie),
+        progress=True,
     )
     paths = write_piv_render(prefix, result, overwrite=overwrite)
     truth = result.reference.truth

@@ -355,6 +355,9 @@ def run_piv_case(
     fluid=None,
     run=None,
     reference=None,
+    sensor=None,
+    mie=None,
+    progress=False,
 ):
     """PIV errors of one refractive-index case (module docstring).
 
@@ -367,10 +370,12 @@ def run_piv_case(
         uniform medium).
     piv : rimcl.piv.render.PivConfig, optional
         Imaging, timing and correlation (``piv.settings``).
-    camera, integrator, fluid, run : optional
+    camera, integrator, fluid, run, sensor, mie : optional
         The :mod:`rimcl.scene.config` objects of :func:`rimcl.piv.render.run_piv_render`.
     reference : PivCaseReference, optional
         ``PivCase.reference`` of an earlier case of the same configuration.
+    progress : bool
+        A progress bar over the tracers imaged (on a terminal).
 
     Returns
     -------
@@ -391,6 +396,9 @@ def run_piv_case(
         fluid=fluid,
         run=run,
         reference=None if reference is None else reference.render,
+        sensor=sensor,
+        mie=mie,
+        progress=progress,
     )
     middle = time.perf_counter()
     if reference is None:
@@ -519,7 +527,8 @@ def configs_from_scene(scene):
     -------
     piv : rimcl.piv.render.PivConfig
     configs : dict
-        ``camera``, ``integrator``, ``fluid``, ``run`` for :func:`run_piv_case`.
+        ``camera``, ``integrator``, ``fluid``, ``run``, ``sensor``, ``mie`` for
+        :func:`run_piv_case`.
     """
     from rimcl.scene.config import MeasureConfig
 
@@ -550,6 +559,8 @@ def configs_from_scene(scene):
         "integrator": shared.integrator,
         "fluid": shared.fluid,
         "run": shared.run,
+        "sensor": shared.sensor,
+        "mie": shared.mie,
     }
     return piv, configs
 
@@ -575,7 +586,7 @@ def is_current(path, record):
         return False
 
 
-def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None):
+def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None, progress=False):
     """The PIV case files of a study: one per case, atomic and resumable.
 
     A case whose file :func:`is_current` is kept (unless ``force``); the others are
@@ -596,6 +607,9 @@ def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None):
         Measure every case again.
     report : callable, optional
         Called with one line of text per step.
+
+    progress : bool
+        A progress bar over each case's tracers imaged (on a terminal).
 
     Returns
     -------
@@ -626,6 +640,7 @@ def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None):
             case=argument,
             piv=piv,
             reference=reference,
+            progress=progress,
             **configs,
         )
         reference = case.reference
