@@ -90,6 +90,15 @@ def piv():
     show_default=True,
     help="Threshold of the normalized median test.",
 )
+@click.option(
+    "--export",
+    "exports",
+    multiple=True,
+    type=click.Path(dir_okay=False),
+    help="Also write the vectors as .nc (xarray), .txt (OpenPIV) or .mat (PIVlab); repeatable.",
+)
+@click.option("--pixel-size-m", type=POSITIVE, default=None, help="Exports: metres per pixel.")
+@click.option("--dt-s", type=POSITIVE, default=None, help="Exports: seconds between A and B.")
 @overwrite_option
 @handle_errors
 def analyze(
@@ -102,6 +111,9 @@ def analyze(
     first_window,
     outlier_eps,
     outlier_threshold,
+    exports,
+    pixel_size_m,
+    dt_s,
     overwrite,
 ):
     """Correlate two grey TIFF frames A and B into a displacement field (HDF5).
@@ -113,7 +125,8 @@ def analyze(
     Example:
       rimcl piv analyze run_field_A.tif run_field_B.tif -o vectors.h5 --window 32 --passes 3
     """
-    from rimcl.piv.analysis import PivSettings, analyze_files
+    from rimcl.piv.analysis import PivSettings
+    from rimcl.piv.export import run_analyze
 
     settings = PivSettings(
         window=window,
@@ -123,7 +136,9 @@ def analyze(
         outlier_eps=outlier_eps,
         outlier_threshold=outlier_threshold,
     )
-    result = analyze_files(image_a, image_b, output, settings, overwrite=overwrite)
+    result = run_analyze(
+        image_a, image_b, output, settings, exports, pixel_size_m, dt_s, overwrite=overwrite
+    )
     rows, cols = result.dx.shape
     click.echo(
         f"{rows} x {cols} vectors ({result.window} px windows, overlap {overlap:g}), "
@@ -134,7 +149,7 @@ def analyze(
     )
     times = ", ".join(f"{seconds:.3f}" for seconds in result.pass_seconds)
     click.echo(f"seconds per pass: {times}")
-    click.echo(f"wrote {output}")
+    click.echo("wrote " + ", ".join(str(path) for path in (output, *exports)))
 
 
 @piv.command()

@@ -27,6 +27,9 @@ from rimcl.optics.trace import STATUS_NAMES
 #: Tile side of ``cl/frame.cl`` (pixels): one work-item per tile; 32 gives a 1024² frame
 #: 1024 work-items, enough for CPUs, and a ray's footprint crosses few tile edges.
 TILE = 32
+#: Work-group size of both frame kernels: fixed, so that PoCL compiles each work-group
+#: function once (it specialises kernels per local size) whatever the batch or frame size.
+FRAME_GROUP = 8
 #: Rays per batch: about 60 MB of device buffers (image point, steps, code, Mie weight).
 BATCH_RAYS = 1 << 21
 _ROW_COLLECTED, _ROW_VIGNETTED, _ROW_OFF_FRAME, _ROW_STATUS, _ROW_BOX, _ROW_LONGS = (
@@ -235,7 +238,9 @@ class DeviceFrames:
             self.rows_l,
             self.rows_d,
         )
-        rows_event = cl.enqueue_nd_range_kernel(self.queue, self.rows_kernel, (count,), None)
+        rows_event = cl.enqueue_nd_range_kernel(
+            self.queue, self.rows_kernel, (_padded(count),), (FRAME_GROUP,)
+        )
         rows_l = np.empty((count, _ROW_LONGS), dtype=np.int64)
         rows_d = np.empty((count, 2), dtype=np.float64)
         cl.enqueue_copy(self.queue, rows_l, self.rows_l)
@@ -269,7 +274,14 @@ class DeviceFrames:
             np.float64(self.renderer.psf_sigma),
             self.light,
         )
-        splat_event = cl.enqueue_nd_range_kernel(self.queue, self.splat_kernel, (n_tiles,), None)
+        splat_event = cl.enqueue_nd_range_kernel(
+            self.queue, self.splat_kernel, (_padded(n_tiles),), (FRAME_GROUP,)
+        )
         splat_event.wait()
         totals["seconds"]["trace"] += event_seconds(fan_event)
         totals["seconds"]["render"] += event_seconds(rows_event) + event_seconds(splat_event)
+
+
+def _padded(count):
+    """``count`` work-items rounded up to whole work-groups (the kernels skip the extra)."""
+    return -(-int(count) // FRAME_GROUP) * FRAME_GROUP

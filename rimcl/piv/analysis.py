@@ -641,29 +641,3 @@ def write_tiff(path, counts, config=None, overwrite=True):
     note = to_json({"config": config or {}, "versions": versions()})
     with atomic_path(path, overwrite=overwrite) as tmp:
         tifffile.imwrite(tmp, counts.astype(np.uint16), photometric="minisblack", description=note)
-
-
-def analyze_files(path_a, path_b, output, settings=None, overwrite=False):
-    """What ``rimcl piv analyze`` does: read two TIFF frames, correlate, write HDF5.
-
-    Parameters
-    ----------
-    path_a, path_b : str or Path
-        Frames A and B.
-    output : str or Path
-        The HDF5 file of :func:`write_piv`.
-    settings : PivSettings, optional
-    overwrite : bool
-
-    Returns
-    -------
-    PivResult
-    """
-    from rimcl.core.provenance import check_output
-
-    check_output(output, overwrite)
-    image_a, image_b = read_tiff(path_a), read_tiff(path_b)
-    result = analyze_pair(image_a, image_b, settings)
-    inputs = {"image_a": str(Path(path_a).resolve()), "image_b": str(Path(path_b).resolve())}
-    write_piv(output, result, {"inputs": inputs}, overwrite=overwrite)
-    return result
