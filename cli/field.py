@@ -174,7 +174,7 @@ def import_(inputs, axes, crop, stride, frames, t0, dt, boundary, period, gradie
 
     INPUTS are cut-out files with datasets Density_<tttt> / density_<tttt> (and optionally
     Velocity_<tttt>), shaped (nz, ny, nx, ncomp) with 1-D xcoor, ycoor, zcoor; one file
-    per time or several times per file. Or one .npz (see the README).
+    per time or several times per file. Or one .npz (docs: import a flow field).
 
     \b
       rimcl field import mixing_0285.h5 mixing_0286.h5 -o jhtdb.h5

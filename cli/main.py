@@ -23,6 +23,7 @@ COMMANDS = {
     "study": ("rimcl.cli.study", "study", "The whole chain over refractive-index cases."),
     "bench": ("rimcl.cli.bench", "bench", "Speed against accuracy of the tracing methods."),
     "piv": ("rimcl.cli.piv", "piv", "PIV: correlate image pairs; render pairs through a field."),
+    "lpt": ("rimcl.cli.lpt", "lpt", "3-D particle tracking: camera rigs, calibration, datasets."),
 }
 
 

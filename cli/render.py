@@ -182,7 +182,8 @@ def render(
     from rimcl.core.device import describe_device
     from rimcl.core.provenance import check_output
     from rimcl.fields.field_loading import case_arguments
-    from rimcl.ptv.measure import check_frame_image, run_render, write_frame_image, write_render
+    from rimcl.ptv.measure import run_render
+    from rimcl.ptv.render_file import check_frame_image, write_frame_image, write_render
     from rimcl.scene.config import MeasureConfig
 
     check_output(output, overwrite)

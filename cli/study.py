@@ -43,7 +43,7 @@ def _case_list(_ctx, _param, value):
 @click.option(
     "--preset",
     type=click.Choice(["paper"]),
-    help="A named scene under SCENE_FILE's keys; paper: the paper's own imaging (README).",
+    help="A named scene under SCENE_FILE's keys; paper: the paper's own imaging (docs: the paper).",
 )
 @engine_option
 @click.option(

@@ -24,7 +24,7 @@ _EXPORTS = {
     "FieldFile": "rimcl.fields.field_reader",
     "sample_path": "rimcl.fields.sample",
     "run_render": "rimcl.ptv.measure",
-    "write_render": "rimcl.ptv.measure",
+    "write_render": "rimcl.ptv.render_file",
     "load_render": "rimcl.stats.render_file",
     "compute_stats": "rimcl.stats.document",
     "run_stats": "rimcl.stats.document",

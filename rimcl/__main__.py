@@ -2,4 +2,5 @@
 
 from rimcl.cli.main import cli
 
-cli(prog_name="rimcl")
+if __name__ == "__main__":  # not when a documentation tool imports every module
+    cli(prog_name="rimcl")

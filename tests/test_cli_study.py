@@ -12,7 +12,8 @@ from click.testing import CliRunner
 from synthetic_render import write_render_file
 
 from rimcl.cli.main import cli
-from rimcl.scene.load import default_scene, load_scene
+from rimcl.scene.keys import default_scene
+from rimcl.scene.load import load_scene
 from rimcl.stats.render_file import load_render
 
 QUICK = ["--tracers", "6", "--fan", "6", "--no-progress", "--no-figures"]

@@ -24,6 +24,7 @@ from rimcl.fields.sample import sample_path
 from rimcl.ptv.measure import run_render
 from rimcl.scene.config import MeasureConfig
 from rimcl.scene.load import load_scene, scene_text
+from rimcl.scene.study_config import StudyConfig
 from rimcl.study.distributed import (
     KINEMATIC_TABLES,
     _reference_for,
@@ -217,9 +218,9 @@ class DieWhileWriting(distributed.WorkerPlugin):
         self.case, self.target, self.marker = case, target, marker
 
     def setup(self, worker):
-        import rimcl.ptv.measure
+        import rimcl.ptv.render_file
 
-        stamp = rimcl.ptv.measure.stamp_h5
+        stamp = rimcl.ptv.render_file.stamp_h5
 
         def stamp_then_die(h5obj, *args, **kwargs):
             stamp(h5obj, *args, **kwargs)  # the file now holds attributes but no tables
@@ -229,7 +230,7 @@ class DieWhileWriting(distributed.WorkerPlugin):
                     Path(self.marker).write_text(name)
                     os._exit(1)
 
-        rimcl.ptv.measure.stamp_h5 = stamp_then_die
+        rimcl.ptv.render_file.stamp_h5 = stamp_then_die
 
 
 def test_a_killed_worker_loses_nothing_and_a_rerun_redoes_only_missing_shards(
@@ -254,7 +255,9 @@ def test_a_killed_worker_loses_nothing_and_a_rerun_redoes_only_missing_shards(
     case_path(out, "C4").unlink()
     shard_path(out, "C4", (7, 14)).unlink()
     with h5py.File(shard_path(out, "C4", (14, 20)), "a") as h5:
-        h5.attrs["study_scene"] = scene_stamp(tiny_scene(device, **{"tracers.seed": 1}))
+        h5.attrs["study_scene"] = scene_stamp(
+            StudyConfig.from_scene(tiny_scene(device, **{"tracers.seed": 1}))
+        )
     kept = shard_path(out, "C4", (0, 7)).stat().st_mtime_ns
     lines = []
     again = run_study(scene, out, figures=False, scheduler="local:1", report=lines.append)

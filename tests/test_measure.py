@@ -12,7 +12,8 @@ from rimcl.core.errors import RimclError
 from rimcl.fields.field_writer import write_field
 from rimcl.imaging.centroid import TracerFlag
 from rimcl.optics.camera import PupilCamera, Scene
-from rimcl.ptv.measure import merge_results, run_render, write_frame_image, write_render
+from rimcl.ptv.measure import run_render
+from rimcl.ptv.render_file import merge_results, write_frame_image, write_render
 from rimcl.scene.config import FluidConfig, MeasureConfig
 
 TIMES = (0.0, 0.01, 0.02)

@@ -21,7 +21,7 @@ from rimcl.piv.render import PivConfig, run_piv_render
 from rimcl.piv.study import load_piv_case, run_piv_case, write_piv_case
 from rimcl.piv.tracer_motion import MOTION_3D, MOTION_SHEET
 from rimcl.piv.truth import window_means
-from rimcl.ptv.measure import uniform_like
+from rimcl.ptv.field_source import uniform_like
 from rimcl.scene.config import CameraConfig, RunConfig
 
 #: 96 px frames, 8 rays per tracer through a pupil, 16 px windows: a case in ~1 s

@@ -9,8 +9,9 @@ from click.testing import CliRunner
 
 from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
-from rimcl.piv.study import STUDY_RECORD, configs_from_scene, study_case_path
+from rimcl.piv.study import STUDY_RECORD, configs_from_study, study_case_path
 from rimcl.scene.load import load_scene
+from rimcl.scene.study_config import StudyConfig
 from rimcl.study.run import run_study
 
 #: two cases on the sample: a handful of PTV tracers, 64 px PIV frames of 4 rays per tracer
@@ -40,11 +41,12 @@ def both(device, tmp_path_factory):
 
 def test_scene_keys_make_the_piv_configuration(device):
     scene = tiny_scene(device, **{"piv.dt": 0.06, "camera.kind": "pupil", "tracers.seed": 3})
-    piv, configs = configs_from_scene(scene)
+    piv, configs = configs_from_study(StudyConfig.from_scene(scene))
     assert piv.imaging.pixels == 64 and piv.settings.window == 16 and piv.dt == 0.06
     assert piv.seed == 3 and piv.start_frame == 0
     assert configs["camera"].kind == "pupil" and configs["camera"].pupil_rays == 4
-    assert configs_from_scene(tiny_scene(device))[1]["camera"].fan == 2  # plane: √4 per side
+    plane = StudyConfig.from_scene(tiny_scene(device))
+    assert configs_from_study(plane)[1]["camera"].fan == 2  # plane: √4 per side
     with pytest.raises(RimclError, match=r"run\.mode .* must be one of ptv, piv, both"):
         tiny_scene(device, **{"run.mode": "pvi"})
     with pytest.raises(RimclError, match=r"unknown key piv\.windows"):

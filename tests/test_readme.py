@@ -1,68 +1,50 @@
-"""The README documents what the code offers: every scene key (in the scene tables), every
-figure, every command and every long option of every command."""
+"""The README is a landing page that works as written: at most 250 lines, the set-up commands
+that CI runs, a quick start that runs, and links into the documentation."""
 
-import importlib
 import re
-from pathlib import Path
 
-import click
-
-from rimcl.cli.main import COMMANDS
-from rimcl.scene.load import SCENE_KEYS
-from rimcl.stats.figures import FIGURE_NAMES
-
-README = Path(__file__).resolve().parents[1] / "README.md"
+import pytest
+from doc_pages import README, ROOT, code_blocks, run_page
 
 
-def _readme():
-    return README.read_text(encoding="utf-8")
+def _ci_lines():
+    """The commands of .ci/run, without comments and shell settings."""
+    lines = (ROOT / ".ci/run").read_text(encoding="utf-8").splitlines()
+    return [line for line in lines if line and not line.startswith(("#", "set ", "cd ", "export "))]
 
 
-def _section(text, heading):
-    """The text of a section, from its heading to the next heading of its level or above."""
-    level = len(heading) - len(heading.lstrip("#"))
-    start = text.index(f"\n{heading}\n")
-    stop = re.search(rf"\n#{{1,{level}}} ", text[start + len(heading) + 2 :])
-    return text[start : start + len(heading) + 2 + (stop.start() if stop else len(text))]
+def test_the_readme_is_a_landing_page():
+    assert len(README.read_text(encoding="utf-8").splitlines()) <= 250
 
 
-def _leaf_commands():
-    """``(name, click command)`` of every command and sub-command of ``rimcl``."""
-    found = []
-    for name, (module, attribute, _) in COMMANDS.items():
-        command = getattr(importlib.import_module(module), attribute)
-        if isinstance(command, click.Group):
-            found += [(f"{name} {sub}", command.commands[sub]) for sub in command.commands]
-        else:
-            found.append((name, command))
-    return found
+def test_the_readme_test_command_is_the_one_ci_runs():
+    blocks = [b.text for b in code_blocks(README) if b.lang == "bash"]
+    test_command = next(line for line in _ci_lines() if line.endswith("&& pytest"))
+    assert test_command in blocks
+    # the main job: the same set-up with the runtime extra, then the default study
+    main_job = test_command.replace('".[pocl,test]"', '".[pocl]"').replace(
+        "&& pytest", "&& rimcl study --out study-out"
+    )
+    assert main_job in blocks
 
 
-def test_the_scene_tables_list_every_scene_key_once():
-    tables = _section(_readme(), "### Scene files")
-    listed = re.findall(r"^\| `([a-z_]+\.[a-z0-9_]+)` \|", tables, flags=re.MULTILINE)
-    expected = {key.dotted for key in SCENE_KEYS}
-    assert sorted(set(listed) - expected) == [], "README lists keys the scene does not have"
-    assert sorted(expected - set(listed)) == [], "scene keys missing from the README tables"
-    assert len(listed) == len(set(listed)), "a scene key is listed twice"
+def test_the_docs_build_command_is_the_one_ci_runs():
+    build = next(line for line in _ci_lines() if "sphinx-build" in line)
+    assert build == (
+        'pip install -e ".[docs]" && sphinx-build -W --keep-going -b html docs docs/_build/html'
+    )
+    for page in (README, ROOT / "docs/install.md", ROOT / "docs/README.md"):
+        assert build in page.read_text(encoding="utf-8"), page
 
 
-def test_the_figures_table_names_every_figure():
-    table = _section(_readme(), "### Figures")
-    named = set(re.findall(r"^\| `([a-z_]+)` \|", table, flags=re.MULTILINE))
-    assert named == {*FIGURE_NAMES, "dt_sweep"}
+def test_the_readme_links_every_tutorial_and_how_to():
+    text = README.read_text(encoding="utf-8")
+    linked = set(re.findall(r"\]\((docs/[^)]+\.md)\)", text))
+    for folder in ("tutorials", "howto"):
+        for page in (ROOT / "docs" / folder).glob("*.md"):
+            assert str(page.relative_to(ROOT)) in linked
 
 
-def test_every_command_and_long_option_is_documented():
-    text = _readme()
-    missing = []
-    for name, command in _leaf_commands():
-        if f"rimcl {name}" not in text:
-            missing.append(f"rimcl {name}")
-        for parameter in command.params:
-            missing += [
-                f"rimcl {name} {option}"
-                for option in getattr(parameter, "opts", [])
-                if option.startswith("--") and option not in text
-            ]
-    assert missing == []
+@pytest.mark.slow
+def test_the_quick_start_runs(tmp_path):
+    assert run_page(README, tmp_path) >= 2

@@ -19,6 +19,7 @@ from click.testing import CliRunner
 from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
 from rimcl.scene.load import load_scene, scene_text
+from rimcl.scene.study_config import StudyConfig
 from rimcl.study.case_files import case_path, check_case_file
 from rimcl.study.run import MARKER, run_study
 
@@ -112,7 +113,7 @@ def test_a_damaged_case_file_is_measured_again(finished, device, tmp_path):
     result = run_study(scene, out, figures=False, report=lines.append)
     assert result.ran == ["C1"] and result.skipped == ["C0", "C2"]
     assert any("C1.h5 unreadable or incomplete" in line for line in lines)
-    assert check_case_file(damaged, scene, "C1") is None
+    assert check_case_file(damaged, StudyConfig.from_scene(scene), "C1") is None
 
 
 def _copy(source, target):
@@ -122,24 +123,30 @@ def _copy(source, target):
 
 def test_check_case_file_names_why_a_file_cannot_be_kept(finished, device, tmp_path):
     scene, out = finished
+    study = StudyConfig.from_scene(scene)
     c0 = case_path(out, "C0")
-    assert check_case_file(c0, scene, "C0") is None
-    assert check_case_file(c0, scene, "C1") == "holds case 'C0', not 'C1'"
-    other = tiny(device, **{"tracers.count": 9})
+    assert check_case_file(c0, study, "C0") is None
+    assert check_case_file(c0, study, "C1") == "holds case 'C0', not 'C1'"
+    other = StudyConfig.from_scene(tiny(device, **{"tracers.count": 9}))
     assert check_case_file(c0, other, "C0") == ("made for another scene (tracers.count: 6 -> 9)")
     # the device and batch size may differ
-    assert check_case_file(c0, tiny(device, **{"run.rays_per_batch": 999}), "C0") is None
+    assert (
+        check_case_file(
+            c0, StudyConfig.from_scene(tiny(device, **{"run.rays_per_batch": 999})), "C0"
+        )
+        is None
+    )
     no_velocity = _copy(c0, tmp_path / "C0.h5")
     with h5py.File(no_velocity, "a") as h5:
         del h5["velocity"]
-    assert "group 'velocity' is missing" in check_case_file(no_velocity, scene, "C0")
+    assert "group 'velocity' is missing" in check_case_file(no_velocity, study, "C0")
     short = _copy(c0, tmp_path / "short.h5")
     with h5py.File(short, "a") as h5:
         for name in list(h5["acceleration"]):
             values = h5["acceleration"][name][()]
             del h5["acceleration"][name]
             h5["acceleration"][name] = values[:4]
-    reason = check_case_file(short, scene, "C0")
+    reason = check_case_file(short, study, "C0")
     wanted = scene["tracers"]["count"] * (scene["time"]["frames"] - 2)
     assert reason == f"incomplete (acceleration has 4 rows, the scene needs {wanted})"
     unrecorded = _copy(c0, tmp_path / "unrecorded.h5")
@@ -147,10 +154,10 @@ def test_check_case_file_names_why_a_file_cannot_be_kept(finished, device, tmp_p
         config = json.loads(h5.attrs["config"])
         del config["study_scene"]
         h5.attrs["config"] = json.dumps(config)
-    assert "records no study scene" in check_case_file(unrecorded, scene, "C0")
+    assert "records no study scene" in check_case_file(unrecorded, study, "C0")
     garbage = tmp_path / "garbage.h5"
     garbage.write_bytes(b"\x89HDF\r\n\x1a\n" + os.urandom(2000))
-    assert check_case_file(garbage, scene, "C0").startswith("unreadable or incomplete")
+    assert check_case_file(garbage, study, "C0").startswith("unreadable or incomplete")
 
 
 def test_outputs_rimcl_did_not_write_are_refused_never_overwritten(device, tmp_path):

@@ -4,14 +4,9 @@ import pytest
 
 from rimcl.core.errors import RimclError
 from rimcl.scene.config import MeasureConfig
-from rimcl.scene.load import (
-    SCENE_KEYS,
-    default_scene,
-    default_scene_text,
-    load_scene,
-    scene_text,
-    validate_scene,
-)
+from rimcl.scene.keys import SCENE_KEYS, default_scene
+from rimcl.scene.load import default_scene_text, load_scene, scene_text
+from rimcl.scene.validate import validate_scene
 
 
 def test_printed_default_scene_documents_every_key_and_reads_back_as_the_default(tmp_path):

@@ -5,6 +5,7 @@ from synthetic_budget import write_budget_file
 from synthetic_render import write_render_file
 
 from rimcl.scene.load import load_scene
+from rimcl.scene.study_config import StudyConfig
 from rimcl.stats.document import compute_stats
 from rimcl.stats.render_file import load_render
 from rimcl.study.summary import significant, summary_markdown, with_interval
@@ -12,7 +13,7 @@ from rimcl.study.summary import significant, summary_markdown, with_interval
 
 @pytest.fixture(scope="module")
 def scene():
-    return load_scene(None)
+    return StudyConfig.from_scene(load_scene(None))
 
 
 def table_rows(text, first_cell):

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from rimcl.fields.field_writer import write_field
-from rimcl.ptv.measure import run_render, write_render
+from rimcl.ptv.measure import run_render
+from rimcl.ptv.render_file import write_render
 from rimcl.ptv.sweep import every_mth_frame
 from rimcl.scene.config import MeasureConfig, TimeConfig
 from rimcl.stats.render_file import load_render

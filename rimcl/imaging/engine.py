@@ -308,7 +308,7 @@ class FanStage:
 
 
 class DeviceEngine:
-    """The device pipeline of one measurement (:class:`rimcl.ptv.measure.Setup`).
+    """The device pipeline of one measurement (:class:`rimcl.ptv.run_setup.Setup`).
 
     Device buffers are made once per run; the field of a frame is uploaded once (and kept
     with the field); batches are double-buffered: the host prepares and sends batch k + 1
@@ -413,7 +413,7 @@ class DeviceEngine:
     ):
         """Trace, render and locate every tracer of one frame on the device.
 
-        The device counterpart of the NumPy path of ``rimcl.ptv.measure._image_frame``, with
+        The device counterpart of the NumPy path of ``rimcl.ptv.imaging_passes._image_frame``, with
         the same parameters, plus ``weights``: light per ray, a number, ``(K,)`` (the same
         fan weights for every tracer, as Mie weights of the initial directions) or
         ``(N, K)``.

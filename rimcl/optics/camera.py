@@ -424,6 +424,63 @@ def _refract(directions, ratio):
     return refracted
 
 
+def aim_through_layers(lateral, depths, ratios):
+    """Unit start directions of rays that cross flat layers normal to ``x1`` and reach a
+    given lateral offset (Snell at every interface).
+
+    Parameters
+    ----------
+    lateral : ndarray, shape (..., 2)
+        ``(x2, x3)`` offset from the start to the aim point (length units).
+    depths : ndarray, shape (3,) or (..., 3)
+        ``x1`` thickness of each layer, the start's first (length units, >= 0).
+    ratios : ndarray, shape (3,)
+        ``n_start / n_layer`` of each layer (1 for the first).
+
+    Returns
+    -------
+    ndarray, float64, shape (..., 3)
+        Directions in the first layer, towards ``+x1``.
+    """
+    reach = np.linalg.norm(lateral, axis=-1)
+    # lateral run = Σ depth_i tan θ_i with sin θ_i = ratio_i sin θ (Snell at both faces)
+    sine = np.minimum(reach / np.sum(depths * ratios, axis=-1), 0.999 / ratios.max())
+    for _ in range(50):  # convex and increasing: Newton from above converges monotonically
+        s = sine[..., None] * ratios
+        cosine = np.sqrt(1.0 - s**2)
+        run = np.sum(depths * s / cosine, axis=-1)
+        # c·c·c, not c**3: a pow whose last bit depends on the CPU (SIMD or libm)
+        slope = np.sum(depths * ratios / (cosine * cosine * cosine), axis=-1)
+        sine = sine - (run - reach) / slope
+    unit = np.divide(
+        lateral, reach[..., None], out=np.zeros_like(lateral), where=reach[..., None] > 0
+    )
+    return np.concatenate([np.sqrt(1.0 - sine**2)[..., None], sine[..., None] * unit], axis=-1)
+
+
+def cross_window(end_pos, end_dir, thickness, fluid_index, window):
+    """Rays leaving the fluid at ``x1 = x_end`` carried through a flat window.
+
+    Parameters
+    ----------
+    end_pos, end_dir : ndarray, shape (K, 3)
+        Exit points on the window's inner face and unit directions in the fluid.
+    thickness : float
+        The window's thickness (length units of ``end_pos``).
+    fluid_index : float or ndarray, shape (K,)
+        Index of the fluid at each exit point.
+    window : FlatWindow
+
+    Returns
+    -------
+    positions, directions : ndarray, shape (K, 3)
+        On the outer face, and unit directions outside; NaN where reflected totally.
+    """
+    in_glass = _refract(end_dir, fluid_index / window.glass_index)
+    positions = end_pos + (thickness / in_glass[:, :1]) * in_glass
+    return positions, _refract(end_dir, fluid_index / window.outside_index)
+
+
 @dataclasses.dataclass(frozen=True)
 class LensCamera:
     """A real camera: a thin lens of given focal length and f-number, focused on the sheet.
@@ -636,8 +693,6 @@ class LensCamera:
             lateral = aims[None, :, 1:] - tracers[:, None, :]
         else:
             lateral = aims[np.asarray(aim_index), 1:] - tracers
-        reach = np.linalg.norm(lateral, axis=-1)
-        # lateral run = Σ depth_i tan θ_i with sin θ_i = ratio_i sin θ (Snell at both faces)
         depths = np.array(
             [self.scene.depth, self._thickness, aims[0, 0] - self.scene.x_end - self._thickness]
         )
@@ -648,18 +703,7 @@ class LensCamera:
                 self.fluid_index / self.window.outside_index,
             ]
         )
-        sine = np.minimum(reach / np.sum(depths * ratios), 0.999 / ratios.max())
-        for _ in range(50):  # convex and increasing: Newton from above converges monotonically
-            s = sine[..., None] * ratios
-            cosine = np.sqrt(1.0 - s**2)
-            run = np.sum(depths * s / cosine, axis=-1)
-            # c·c·c, not c**3: a pow whose last bit depends on the CPU (SIMD or libm)
-            slope = np.sum(depths * ratios / (cosine * cosine * cosine), axis=-1)
-            sine = sine - (run - reach) / slope
-        unit = np.divide(
-            lateral, reach[..., None], out=np.zeros_like(lateral), where=reach[..., None] > 0
-        )
-        return np.concatenate([np.sqrt(1.0 - sine**2)[..., None], sine[..., None] * unit], axis=-1)
+        return aim_through_layers(lateral, depths, ratios)
 
     def through_window(self, end_pos, end_dir, exit_index=None):
         """Exit rays after the window (unchanged without one).
@@ -682,9 +726,7 @@ class LensCamera:
         if self.window is None:
             return end_pos, end_dir
         n_fluid = self.fluid_index if exit_index is None else np.asarray(exit_index)
-        in_glass = _refract(end_dir, n_fluid / self.window.glass_index)
-        positions = end_pos + (self._thickness / in_glass[:, :1]) * in_glass
-        return positions, _refract(end_dir, n_fluid / self.window.outside_index)
+        return cross_window(end_pos, end_dir, self._thickness, n_fluid, self.window)
 
     def collected(self, end_pos, end_dir, exit_index=None):
         """Which exit rays pass through the pupil (after the window), shape (K,) bool."""

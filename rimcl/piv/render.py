@@ -333,7 +333,7 @@ def run_piv_render(
     PivRender
     """
     from rimcl.core.device import describe_device, select_device
-    from rimcl.ptv.measure import case_of, open_source, reference_step, uniform_like
+    from rimcl.ptv.field_source import case_of, open_source, reference_step, uniform_like
 
     piv = PivConfig() if piv is None else piv
     camera_config = PIV_CAMERA if camera is None else camera

@@ -511,17 +511,16 @@ def agreement_with_ptv(piv_stats, ptv_stats):
     return result
 
 
-def configs_from_scene(scene):
-    """The PIV measurement of a study scene (``[piv]`` and the shared sections).
+def configs_from_study(study):
+    """The PIV measurement of a study (``[piv]`` and the shared sections of its scene).
 
-    The field, box, sheet, start frame, camera kind and optics, integrator, fluid, device
-    and tracer seed are the scene's (those of the PTV cases); the camera aims
+    The field, box, sheet, start frame, camera kind and optics, integrator, fluid, sensor,
+    Mie weights, engine, device and tracer seed are the scene's (those of the PTV cases); the camera aims
     ``piv.rays`` rays per tracer (a plane camera a fan of ``round(√rays)²``).
 
     Parameters
     ----------
-    scene : dict
-        A complete scene (:func:`rimcl.scene.load.load_scene`).
+    study : rimcl.scene.study_config.StudyConfig
 
     Returns
     -------
@@ -530,23 +529,18 @@ def configs_from_scene(scene):
         ``camera``, ``integrator``, ``fluid``, ``run``, ``sensor``, ``mie`` for
         :func:`run_piv_case`.
     """
-    from rimcl.scene.config import MeasureConfig
-
-    shared = MeasureConfig.from_scene(scene, scene["cases"]["names"][0])
-    section = scene["piv"]
-    rays = int(section["rays"])
+    shared, section = study.shared, study.piv
+    rays = int(section.rays)
     piv = PivConfig(
         imaging=PivImaging(
-            pixels=section["pixels"],
-            density=section["density"],
-            diameter=section["diameter"],
-            sheet_thickness=section["sheet_thickness"],
-            bit_depth=section["bit_depth"],
+            pixels=section.pixels,
+            density=section.density,
+            diameter=section.diameter,
+            sheet_thickness=section.sheet_thickness,
+            bit_depth=section.bit_depth,
         ),
-        settings=PivSettings(
-            window=section["window"], overlap=section["overlap"], passes=section["passes"]
-        ),
-        dt=section["dt"],
+        settings=PivSettings(window=section.window, overlap=section.overlap, passes=section.passes),
+        dt=section.dt,
         start_frame=shared.time.start_frame,
         box=shared.box,
         x_sheet=shared.x_sheet,
@@ -586,7 +580,7 @@ def is_current(path, record):
         return False
 
 
-def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None, progress=False):
+def run_study_cases(study, out_dir, record, cases, *, force=False, report=None, progress=False):
     """The PIV case files of a study: one per case, atomic and resumable.
 
     A case whose file :func:`is_current` is kept (unless ``force``); the others are
@@ -595,8 +589,7 @@ def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None, 
 
     Parameters
     ----------
-    scene : dict
-        A complete scene.
+    study : rimcl.scene.study_config.StudyConfig
     out_dir : str or Path
         The study directory; files go to ``DIR/piv/<case>.h5``.
     record : dict
@@ -607,7 +600,6 @@ def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None, 
         Measure every case again.
     report : callable, optional
         Called with one line of text per step.
-
     progress : bool
         A progress bar over each case's tracers imaged (on a terminal).
 
@@ -619,7 +611,7 @@ def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None, 
         Cases measured in this call.
     """
     say = report or (lambda line: None)
-    piv, configs = configs_from_scene(scene)
+    piv, configs = configs_from_study(study)
     folder = Path(out_dir) / STUDY_FOLDER
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -636,7 +628,7 @@ def run_study_cases(scene, out_dir, record, cases, *, force=False, report=None, 
         say(f"{step}: imaging and correlating")
         start = time.perf_counter()
         case = run_piv_case(
-            scene["field"]["path"] or None,
+            study.field_path or None,
             case=argument,
             piv=piv,
             reference=reference,

@@ -9,6 +9,7 @@ import numpy as np
 from scipy.ndimage import map_coordinates, spline_filter
 
 from rimcl.core.errors import RimclError
+from rimcl.ptv.imaging_passes import TRACKING_SUBSTEPS
 from rimcl.ptv.track import SheetVelocity, integrate_tracks
 
 
@@ -70,9 +71,6 @@ class FlowVelocity:
         )
 
 
-#: RK4 steps between the two exposures at least, and at least this many per stored frame
-#: interval (the rule of the PTV tracks, :mod:`rimcl.ptv.measure`).
-TRACKING_SUBSTEPS = 8
 MOTION_3D = "3-D: tracers carried by the full velocity (u1, u2, u3); out-of-plane loss modelled"
 MOTION_SHEET = (
     "in-plane only: the field file stores the velocity on the sheet plane alone, so every "
@@ -87,7 +85,8 @@ def move_tracers(source, scene, start, times, frames):
     With the full velocity, tracers move in 3-D (:class:`FlowVelocity`), across the sheet
     too; with only the sheet velocity (``velocity_sheet``), every tracer moves with the
     sheet's in-plane velocity at its ``(x2, x3)`` and keeps its depth (:mod:`rimcl.piv.render`).
-    RK4 with at least :data:`TRACKING_SUBSTEPS` steps per stored frame interval.
+    RK4 with at least :data:`~rimcl.ptv.imaging_passes.TRACKING_SUBSTEPS` steps per stored
+    frame interval (the rule of the PTV tracks).
 
     Parameters
     ----------

@@ -16,8 +16,9 @@ import numpy as np
 
 from rimcl.fields.crop import StridedSource
 from rimcl.optics.trace import default_step
-from rimcl.ptv.measure import case_of, open_source, run_render
-from rimcl.scene.config import MeasureConfig, TimeConfig, TracerConfig
+from rimcl.ptv.field_source import case_of, open_source
+from rimcl.ptv.measure import run_render
+from rimcl.scene.config import TimeConfig, TracerConfig
 
 #: Tracers measured per run (the first of the study's tracers, same seed).
 NUMERICS_TRACERS = 200
@@ -35,14 +36,14 @@ def _errors(result, measured="meas", reference="ref"):
     return error[usable] / result.attrs["length_L"]
 
 
-def numerical_convergence(scene, case="C1", tracers=NUMERICS_TRACERS):
+def numerical_convergence(study, case="C1", tracers=NUMERICS_TRACERS):
     """``|ε_x| / L`` of one case at the default step, at half of it, and on a grid of every
     second node, with the study's scene otherwise.
 
     Parameters
     ----------
-    scene : dict
-        A complete scene (:func:`rimcl.scene.load.load_scene`).
+    study : rimcl.scene.study_config.StudyConfig
+        The study (its field and the case's configuration).
     case : str
         The case measured (default C1, air, as the paper's Appendix A).
     tracers : int
@@ -56,7 +57,7 @@ def numerical_convergence(scene, case="C1", tracers=NUMERICS_TRACERS):
         ``median_over_L``, and the same of the optics means; ``step_ratio`` and
         ``grid_ratio``: medians at h/2 over h and on the coarse over the full grid.
     """
-    config = MeasureConfig.from_scene(scene, case)
+    config = study.measure(case)
     config = dataclasses.replace(
         config,
         time=TimeConfig(frames=1, start_frame=config.time.start_frame),
@@ -66,7 +67,7 @@ def numerical_convergence(scene, case="C1", tracers=NUMERICS_TRACERS):
             margin=config.tracers.margin,
         ),
     )
-    field_path = scene["field"]["path"] or None
+    field_path = study.field_path or None
     runs = {}
     with ExitStack() as stack:
         source, _name = open_source(field_path, stack)

@@ -12,7 +12,7 @@ import dataclasses
 
 import numpy as np
 
-from rimcl.ptv.measure import kinematics_tables
+from rimcl.ptv.kinematics import kinematics_tables
 from rimcl.scene.config import TimeConfig
 
 #: Position kinds of a render file's ``tracers`` table (columns ``x2_<kind>``, ``x3_<kind>``).
@@ -72,7 +72,7 @@ def every_mth_frame(tables, multiple, time_config):
     )
 
 
-def sweep_stats(all_tables, multiples, scene_time, compute):
+def sweep_stats(all_tables, multiples, time, compute):
     """``stats.json`` documents of a study at every multiple of its frame spacing.
 
     Parameters
@@ -81,8 +81,8 @@ def sweep_stats(all_tables, multiples, scene_time, compute):
         The study's cases.
     multiples : sequence of int
         ``m`` values (``time.dt_multiples``).
-    scene_time : dict
-        The scene's ``[time]`` section (fit window and order).
+    time : rimcl.scene.config.TimeConfig
+        The study's (its fit window and order).
     compute : callable
         ``compute(list of RenderTables) -> stats document``
         (:func:`rimcl.stats.document.compute_stats`).
@@ -93,9 +93,7 @@ def sweep_stats(all_tables, multiples, scene_time, compute):
         Δt → the stats document of the cases imaged that far apart (multiples that leave
         fewer than 2 frames are skipped).
     """
-    time_config = TimeConfig(
-        frames=1, fit_window=scene_time["fit_window"], fit_order=scene_time["fit_order"]
-    )
+    time_config = TimeConfig(frames=1, fit_window=time.fit_window, fit_order=time.fit_order)
     documents = {}
     for multiple in sorted(set(int(m) for m in multiples)):
         strided = [every_mth_frame(t, multiple, time_config) for t in all_tables]

@@ -477,7 +477,8 @@ class MeasureConfig:
 
     @classmethod
     def from_scene(cls, scene, case):
-        """The configuration of one case of a scene (:func:`~rimcl.scene.load.load_scene`)."""
+        """The configuration of one case of a scene (:func:`~rimcl.scene.load.load_scene`);
+        the case decides only the threshold (``case`` None: ``renderer.threshold``)."""
         field, cases, tracers = scene["field"], scene["cases"], scene["tracers"]
         camera, renderer = scene["camera"], scene["renderer"]
         integrator, run = scene["integrator"], scene["run"]

@@ -6,7 +6,6 @@ it is a readable render file of its case, complete for the scene's tracers and f
 measured for the same scene in every key that changes the numbers.
 """
 
-import json
 from pathlib import Path
 
 from rimcl.core.errors import RimclError, first_line
@@ -25,9 +24,10 @@ RUN_ONLY_KEYS = (
 SCENE_RECORD = "study_scene"
 
 
-def comparable_scene(scene):
-    """The scene without :data:`RUN_ONLY_KEYS` (a deep copy)."""
-    trimmed = json.loads(json.dumps(scene))
+def comparable_scene(study):
+    """The scene of a :class:`~rimcl.scene.study_config.StudyConfig` without
+    :data:`RUN_ONLY_KEYS` (a fresh dict)."""
+    trimmed = study.scene_record()
     for section, name in RUN_ONLY_KEYS:
         trimmed.get(section, {}).pop(name, None)
     return trimmed
@@ -48,18 +48,17 @@ def case_path(out_dir, case):
     return Path(out_dir) / "cases" / f"{case}.h5"
 
 
-def check_case_file(path, scene, case):
-    """Why a study's case file cannot be kept for ``scene``, or None if it can.
+def check_case_file(path, study, case):
+    """Why a study's case file cannot be kept for ``study``, or None if it can.
 
     A case file is kept only if it is a readable render file of ``case`` with every group
-    and the row counts of the scene's tracers, and its recorded scene equals ``scene``
+    and the row counts of the study's tracers, and its recorded scene equals the study's
     in every key that changes the measurement (:data:`RUN_ONLY_KEYS` may differ).
 
     Parameters
     ----------
     path : str or Path
-    scene : dict
-        A complete scene.
+    study : rimcl.scene.study_config.StudyConfig
     case : str
         The case name the file must hold.
 
@@ -82,11 +81,11 @@ def check_case_file(path, scene, case):
     recorded = tables.provenance.get("config", {}).get(SCENE_RECORD)
     if not isinstance(recorded, dict):
         return "records no study scene (written by rimcl render or an older rimcl)"
-    changes = scene_differences(recorded, comparable_scene(scene))
+    changes = scene_differences(recorded, comparable_scene(study))
     if changes:
         shown = "; ".join(changes[:3]) + ("; ..." if len(changes) > 3 else "")
         return f"made for another scene ({shown})"
-    for group, wanted in expected_rows(scene).items():
+    for group, wanted in expected_rows(study.shared).items():
         table = getattr(tables, group) or {}
         found = len(table["id"]) if "id" in table else 0
         if found != wanted:
@@ -94,10 +93,11 @@ def check_case_file(path, scene, case):
     return None
 
 
-def expected_rows(scene):
-    """Rows of each table of a complete case file of ``scene`` (0: no such table)."""
-    count, frames = scene["tracers"]["count"], scene["time"]["frames"]
-    window = scene["time"]["fit_window"]
+def expected_rows(config):
+    """Rows of each table of a complete case file measured with ``config`` (a
+    :class:`rimcl.scene.config.MeasureConfig`; 0: no such table)."""
+    count, frames = config.tracers.count, config.time.frames
+    window = config.time.fit_window
     fitted = count * (frames - window + 1) if frames >= window else 0
     return {
         "tracers": count * frames,

@@ -10,16 +10,17 @@ Workers
     :class:`RimclPlugin` gives every worker its OpenCL device and context
     (:func:`worker_device`) and opens the field file once, by path; the loaded frames of
     the latest case stay in memory (and on the device) for the worker's next shard. Tasks
-    carry only the scene (a small dict), the case name, the shard range and file paths:
+    carry only the case's :class:`rimcl.scene.config.MeasureConfig` (a small frozen
+    object), the scene's stamp (JSON text), the case name, the shard range and file paths:
     nothing OpenCL is pickled and the field never travels through the scheduler, so the
     field file and the study directory must be on a filesystem every worker sees.
 
 Files (under the study directory)
     ``shards/<case>/<first>-<stop>.h5``: a ``rimcl render`` file of tracers
     ``first..stop-1``, written atomically by the worker that measured it, plus a group
-    ``reference`` holding that shard's :class:`rimcl.ptv.measure.Reference` (true tracks and
+    ``reference`` holding that shard's :class:`rimcl.ptv.render_file.Reference` (true tracks and
     reference images). When every shard of a case is on disk, the client merges them in
-    shard order (:func:`rimcl.ptv.measure.merge_results`) into ``cases/<case>.h5``
+    shard order (:func:`rimcl.ptv.render_file.merge_results`) into ``cases/<case>.h5``
     (atomically). A lost worker loses only the shard it was measuring (Dask runs it
     again elsewhere); a rerun, after a killed client too, measures only missing shards.
 
@@ -45,7 +46,6 @@ from pathlib import Path
 
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path
-from rimcl.scene.config import MeasureConfig
 
 try:
     from distributed import WorkerPlugin
@@ -110,7 +110,7 @@ def _write_reference(group, reference):
 
 
 def _read_reference(group):
-    from rimcl.ptv.measure import Reference
+    from rimcl.ptv.render_file import Reference
 
     return Reference(
         key=json.loads(group.attrs["key"]),
@@ -124,12 +124,13 @@ def _read_reference(group):
     )
 
 
-def scene_stamp(scene):
-    """What a shard file must have been measured for: the scene without the keys that do
-    not change the numbers (:data:`rimcl.study.case_files.RUN_ONLY_KEYS`), as JSON text."""
+def scene_stamp(study):
+    """What a shard file must have been measured for: the study's scene without the keys
+    that do not change the numbers (:data:`rimcl.study.case_files.RUN_ONLY_KEYS`), as JSON
+    text."""
     from rimcl.study.case_files import comparable_scene
 
-    return json.dumps(comparable_scene(scene), sort_keys=True)
+    return json.dumps(comparable_scene(study), sort_keys=True)
 
 
 def _stamp_of(path):
@@ -143,7 +144,7 @@ def _stamp_of(path):
 
 
 def write_shard(path, result, stamp=""):
-    """Write one shard's :class:`rimcl.ptv.measure.RenderResult` and its reference, atomically.
+    """Write one shard's :class:`rimcl.ptv.render_file.RenderResult` and its reference, atomically.
 
     Parameters
     ----------
@@ -155,7 +156,7 @@ def write_shard(path, result, stamp=""):
     """
     import h5py
 
-    from rimcl.ptv.measure import write_render
+    from rimcl.ptv.render_file import write_render
 
     with atomic_path(path, overwrite=True) as tmp:
         write_render(tmp, result, overwrite=True)
@@ -165,7 +166,7 @@ def write_shard(path, result, stamp=""):
 
 
 def read_shard(path):
-    """A shard file (:func:`write_shard`) as a :class:`rimcl.ptv.measure.RenderResult`.
+    """A shard file (:func:`write_shard`) as a :class:`rimcl.ptv.render_file.RenderResult`.
 
     Returns
     -------
@@ -175,7 +176,7 @@ def read_shard(path):
     """
     import h5py
 
-    from rimcl.ptv.measure import RenderResult
+    from rimcl.ptv.render_file import RenderResult
 
     provenance = ("config", "versions", "device", "timings_s", "study_scene")
     try:
@@ -203,7 +204,8 @@ def read_shard(path):
         )
 
 
-#: The render file's tables of velocities and accelerations (rimcl.ptv.measure.kinematics_tables).
+#: The render file's tables of velocities and accelerations
+#: (rimcl.ptv.kinematics.kinematics_tables).
 KINEMATIC_TABLES = ("velocity", "acceleration", "velocity_fit", "acceleration_fit")
 
 
@@ -222,7 +224,7 @@ def merge_shards(path, shard_paths):
     """
     import h5py
 
-    from rimcl.ptv.measure import merge_results, write_render
+    from rimcl.ptv.render_file import merge_results, write_render
 
     merged = merge_results([read_shard(p) for p in shard_paths])
     with h5py.File(shard_paths[0], "r") as h5:
@@ -372,15 +374,17 @@ def _reference_for(path, plugin):
     return reference if made_on == describe_device(plugin.device) else None
 
 
-def measure_shard(plugin, scene, case, shard, path, reference_path=None, wait_for=None):
+def measure_shard(plugin, config, stamp, case, shard, path, reference_path=None, wait_for=None):
     """One task: measure tracers ``shard`` of ``case`` on this worker into ``path``.
 
     Parameters
     ----------
     plugin : str
         Name of the worker's :class:`RimclPlugin` (:func:`plugin_name`).
-    scene : dict
-        The study's scene.
+    config : rimcl.scene.config.MeasureConfig
+        The case's configuration (:meth:`rimcl.scene.study_config.StudyConfig.measure`).
+    stamp : str
+        :func:`scene_stamp` of the study, recorded in the shard file.
     case : str
     shard : (int, int)
         Tracers ``first..stop-1``.
@@ -401,14 +405,13 @@ def measure_shard(plugin, scene, case, shard, path, reference_path=None, wait_fo
         was there).
     """
     from rimcl.ptv.measure import run_render
-    from rimcl.study.case_files import SCENE_RECORD, comparable_scene
+    from rimcl.study.case_files import SCENE_RECORD
 
     start = time.perf_counter()
     if Path(path).exists():
         return {"path": path, "seconds": 0.0, "measured": False}
     plugin = _plugin(plugin)
     with plugin.lock:
-        config = MeasureConfig.from_scene(scene, case)
         config = dataclasses.replace(
             config, run=dataclasses.replace(config.run, device=plugin.device)
         )
@@ -416,8 +419,8 @@ def measure_shard(plugin, scene, case, shard, path, reference_path=None, wait_fo
         result = run_render(
             plugin.source, case=case, config=config, reference=reference, shard=shard
         )
-        result.config[SCENE_RECORD] = comparable_scene(scene)
-        write_shard(path, result, scene_stamp(scene))
+        result.config[SCENE_RECORD] = json.loads(stamp)
+        write_shard(path, result, stamp)
     return {"path": path, "seconds": time.perf_counter() - start, "measured": True}
 
 
@@ -525,7 +528,7 @@ def _remove_orphans(directory):
         orphan.unlink(missing_ok=True)
 
 
-def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, report=None):
+def measure_cases(study, out_dir, scheduler, *, force=False, progress=False, report=None):
     """Measure every case of a study on a Dask cluster into ``cases/<case>.h5``.
 
     Cases whose file exists are kept (unless ``force``); of the others, only shards
@@ -533,8 +536,8 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
 
     Parameters
     ----------
-    scene : dict
-        A complete scene; ``run.shard_tracers`` sets the shard size.
+    study : rimcl.scene.study_config.StudyConfig
+        ``study.run.shard_tracers`` sets the shard size.
     out_dir : Path
         The study directory (see :mod:`rimcl.study.run`).
     scheduler : str
@@ -559,21 +562,21 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
     _import_distributed(scheduler)
     say = report or (lambda line: None)
     out_dir = Path(out_dir)
-    names = scene["cases"]["names"]
-    shards = shard_ranges(scene["tracers"]["count"], scene["run"]["shard_tracers"])
+    names = study.names
+    shards = shard_ranges(study.shared.tracers.count, study.run.shard_tracers)
     position = {name: index for index, name in enumerate(names, start=1)}
     ran, skipped, seconds = [], [], {}
     todo = []
     for name in names:
         path = case_path(out_dir, name)
-        if path.exists() and not force and check_case_file(path, scene, name) is None:
+        if path.exists() and not force and check_case_file(path, study, name) is None:
             skipped.append(name)
             say(f"[{position[name]}/{len(names)}] {name}: finished earlier, kept")
         else:
             todo.append(name)
     if not todo:
         return ran, skipped, seconds
-    stamp = scene_stamp(scene)
+    stamp = scene_stamp(study)
     for name in names:
         for path in shard_paths(out_dir, name, shards):
             # another scene's shards (left by a forced single-process run) are not kept
@@ -582,9 +585,9 @@ def measure_cases(scene, out_dir, scheduler, *, force=False, progress=False, rep
     for name in todo:
         (out_dir / SHARD_DIR / name).mkdir(parents=True, exist_ok=True)
 
-    field, device = scene["field"]["path"], scene["run"]["device"]
+    field, device = study.field_path, study.shared.run.device
     with connect(scheduler, field, device, say) as (client, plugin):
-        futures, waiting = _submit(client, plugin, scene, out_dir, names, todo, shards)
+        futures, waiting = _submit(client, plugin, study, stamp, out_dir, todo, shards)
         pending = {name: len(tasks) for name, tasks in waiting.items()}
         worker_seconds = dict.fromkeys(todo, 0.0)
 
@@ -644,7 +647,7 @@ def shard_paths(out_dir, case, shards):
     return [shard_path(out_dir, case, shard) for shard in shards]
 
 
-def _submit(client, plugin, scene, out_dir, names, todo, shards):
+def _submit(client, plugin, study, stamp, out_dir, todo, shards):
     """One task per missing shard; a (threshold, shard)'s first task measures the reference.
 
     Returns
@@ -654,13 +657,12 @@ def _submit(client, plugin, scene, out_dir, names, todo, shards):
     waiting : dict of str to list
         The submitted tasks of each case of ``todo``.
     """
-    thresholds = scene["cases"]["thresholds"]
-    default = scene["renderer"]["threshold"]
-    study = uuid.uuid4().hex[:8]
+    run_id = uuid.uuid4().hex[:8]
     providers = {}  # (threshold, shard) -> (shard file with the reference, its task or None)
     futures, waiting = {}, {name: [] for name in todo}
-    for name in names:
-        threshold = thresholds.get(name, default)
+    for name in study.names:
+        config = study.measure(name)
+        threshold = config.renderer.threshold
         for shard in shards:
             path = shard_path(out_dir, name, shard)
             provider = providers.get((threshold, shard))
@@ -672,13 +674,14 @@ def _submit(client, plugin, scene, out_dir, names, todo, shards):
             future = client.submit(
                 measure_shard,
                 plugin,
-                scene,
+                config,
+                stamp,
                 name,
                 shard,
                 str(path),
                 None if reference_path is None else str(reference_path),
                 wait_for,
-                key=f"rimcl-shard-{name}-{shard[0]}-{shard[1]}-{study}",
+                key=f"rimcl-shard-{name}-{shard[0]}-{shard[1]}-{run_id}",
                 pure=False,
             )
             if provider is None:

@@ -43,8 +43,9 @@ from pathlib import Path
 from rimcl import __version__
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path
-from rimcl.scene.config import DEFAULT_PSF_SIGMA, MeasureConfig
-from rimcl.scene.load import load_scene, scene_text
+from rimcl.scene.config import DEFAULT_PSF_SIGMA
+from rimcl.scene.load import load_scene
+from rimcl.scene.study_config import StudyConfig
 from rimcl.study.case_files import (
     SCENE_RECORD,
     case_path,
@@ -91,23 +92,23 @@ class StudyResult:
 
 
 def _read_scene_file(scene_path):
-    """The scene recorded in a study directory; a damaged file is one line of error."""
+    """The study recorded in a study directory; a damaged file is one line of error."""
     try:
-        return load_scene(scene_path)
+        return StudyConfig.from_scene(load_scene(scene_path))
     except (RimclError, ValueError) as exc:  # ValueError: not text at all
         raise RimclError(
             f"{scene_path} is damaged ({exc}); use --force to redo the study, or another --out"
         ) from None
 
 
-def _check_directory(out_dir, scene, force):
+def _check_directory(out_dir, study, force):
     """Refuse to mix the results of two different scenes (the directory exists)."""
     scene_path = out_dir / "scene.toml"
     if force:
         return
     if scene_path.exists():
         previous = comparable_scene(_read_scene_file(scene_path))
-        changes = scene_differences(previous, comparable_scene(scene))
+        changes = scene_differences(previous, comparable_scene(study))
         if changes:
             raise RimclError(
                 f"{out_dir} holds a study of another scene ({'; '.join(changes)}); "
@@ -179,8 +180,9 @@ def _write_text(path, text):
         Path(tmp).write_text(text)
 
 
-def study_cases(scene):
-    """The cases a study of ``scene`` measures: ``(name, case argument)`` pairs.
+def study_cases(study):
+    """The cases a :class:`~rimcl.scene.study_config.StudyConfig` measures: ``(name, case
+    argument)`` pairs.
 
     A field file that stores ``delta_n`` carries its own refractive index: its study has
     one case, :data:`DELTA_N_CASE`, whatever ``cases.names`` says.
@@ -192,9 +194,9 @@ def study_cases(scene):
     from rimcl.fields.field_reader import field_kind
     from rimcl.fields.sample import sample_path
 
-    if field_kind(scene["field"]["path"] or sample_path()) == "delta_n":
+    if field_kind(study.field_path or sample_path()) == "delta_n":
         return [(DELTA_N_CASE, None)]
-    return [(name, name) for name in scene["cases"]["names"]]
+    return [(name, name) for name in study.names]
 
 
 def _up_to_date(out_dir, case_files, figures, mode="ptv"):
@@ -214,7 +216,7 @@ def _up_to_date(out_dir, case_files, figures, mode="ptv"):
     return summary.stat().st_mtime >= max(path.stat().st_mtime for path in inputs)
 
 
-def _check_resources(scene):
+def _check_resources(study):
     """Refuse, before anything is written, a scene whose geometry does not fit its field
     or whose sizes do not fit in memory."""
     from rimcl.core.device import select_device
@@ -223,34 +225,32 @@ def _check_resources(scene):
     from rimcl.fields.sample import sample_path
     from rimcl.optics.camera import Scene
 
-    field = scene["field"]
-    path = field["path"] or sample_path()
+    config = study.shared
+    path = study.field_path or sample_path()
     with FieldFile(path) as source:
         Scene.from_grid(
             source.origin,
             source.spacing,
             source.shape,
             source.boundary,
-            field["x_sheet"],
-            field["depth"],
+            config.x_sheet,
+            config.depth,
         )
-    camera, renderer = scene["camera"], scene["renderer"]
+    camera, renderer = config.camera, config.renderer
     check_render_request(
         source.shape,
         path,
-        tracers=scene["tracers"]["count"],
-        camera=camera["kind"],
-        fan=camera["fan"],
-        pupil_rays=camera["pupil_rays"],
-        rays_per_batch=scene["run"]["rays_per_batch"],
-        frames=scene["time"]["frames"],
-        max_window=renderer["max_window"],
-        pixels=renderer["pixels"],
-        psf_sigma=renderer["psf_sigma"] or DEFAULT_PSF_SIGMA,
-        interp=scene["integrator"]["interp"],
-        device=select_device(
-            scene["run"]["device"] or None, need_fp64=scene["run"]["engine"] == "device"
-        ),
+        tracers=config.tracers.count,
+        camera=camera.kind,
+        fan=camera.fan,
+        pupil_rays=camera.pupil_rays,
+        rays_per_batch=config.run.rays_per_batch,
+        frames=config.time.frames,
+        max_window=renderer.max_window,
+        pixels=renderer.pixels,
+        psf_sigma=renderer.psf_sigma or DEFAULT_PSF_SIGMA,
+        interp=config.integrator.interp,
+        device=select_device(config.run.device, need_fp64=config.run.engine == "device"),
     )
 
 
@@ -258,9 +258,9 @@ class _SceneFile:
     """Writes ``scene.toml`` once the scene has proven itself, retiring the statistics of
     another scene first."""
 
-    def __init__(self, out_dir, scene):
-        self.path, self.scene = out_dir / "scene.toml", scene
-        self.text = scene_text(scene)
+    def __init__(self, out_dir, study):
+        self.path, self.study = out_dir / "scene.toml", study
+        self.text = study.text
 
     def settle(self):
         """Make ``scene.toml`` this scene's (before a case file or statistics of it land)."""
@@ -270,7 +270,7 @@ class _SceneFile:
         if self.path.exists():
             with contextlib.suppress(RimclError):
                 previous = comparable_scene(_read_scene_file(self.path))
-        if previous != comparable_scene(self.scene):
+        if previous != comparable_scene(self.study):
             # statistics and figures of another scene's case files: never beside this one
             for name in ("summary.md", "stats.json"):
                 (self.path.parent / name).unlink(missing_ok=True)
@@ -285,8 +285,9 @@ def run_study(
 
     Parameters
     ----------
-    scene : dict
-        A complete scene (:func:`rimcl.scene.load.load_scene`).
+    scene : StudyConfig, dict, str or Path
+        The study (:class:`rimcl.scene.study_config.StudyConfig`), or a complete scene
+        (:func:`rimcl.scene.load.load_scene`) or scene file, parsed into one here.
     out_dir : str or Path
         Study directory (created if missing).
     force : bool
@@ -313,56 +314,60 @@ def run_study(
         study already running there, an unusable field or device, a scene that cannot fit
         in memory, and every error of the measurement.
     """
-    from rimcl.ptv.measure import run_render, write_render
+    from rimcl.ptv.measure import run_render
+    from rimcl.ptv.render_file import write_render
 
     started = time.perf_counter()
     say = report or (lambda line: None)
     out_dir = Path(out_dir)
-    mode = scene["run"]["mode"]
-    all_cases = study_cases(scene)
+    if isinstance(scene, (str, Path)):
+        scene = load_scene(scene)
+    study = scene if isinstance(scene, StudyConfig) else StudyConfig.from_scene(scene)
+    mode = study.run.mode
+    all_cases = study_cases(study)
     cases = all_cases if mode != "piv" else []
-    _check_resources(scene)
+    _check_resources(study)
     with _claimed(out_dir):
         removed = _remove_stale_parts(out_dir)
         if removed:
             say(f"removed {removed} partial file(s) left by an interrupted run")
-        _check_directory(out_dir, scene, force)
+        _check_directory(out_dir, study, force)
         if all_cases[0][0] == DELTA_N_CASE:
-            say(f"{scene['field']['path']} stores delta_n: one case, its own index")
-        scene_file = _SceneFile(out_dir, scene)
+            say(f"{study.field_path} stores delta_n: one case, its own index")
+        scene_file = _SceneFile(out_dir, study)
         ran, skipped, seconds = [], [], {}
         todo = cases
-        scheduler = scheduler or scene["run"]["scheduler"]
+        scheduler = scheduler or study.run.scheduler
         if scheduler and cases:
             from rimcl.study.distributed import measure_cases
 
             scene_file.settle()
             ran, skipped, seconds = measure_cases(
-                scene, out_dir, scheduler, force=force, progress=progress, report=say
+                study, out_dir, scheduler, force=force, progress=progress, report=say
             )
             todo = []  # the cluster measured every case
         references = {}  # threshold -> reference images (they depend on it, not on the case)
         for index, (name, case) in enumerate(todo, start=1):
             path = case_path(out_dir, name)
             step = f"[{index}/{len(cases)}] {name}"
-            reason = None if force or not path.exists() else check_case_file(path, scene, name)
+            reason = None if force or not path.exists() else check_case_file(path, study, name)
             if path.exists() and not force and reason is None:
                 skipped.append(name)
                 say(f"{step}: finished earlier, kept ({path})")
                 continue
             say(f"{step}: " + (f"{path.name} {reason}; measuring again" if reason else "measuring"))
             case_start = time.perf_counter()
-            config = MeasureConfig.from_scene(scene, name)
+            config = study.measure(name)
             threshold = config.renderer.threshold
             result = run_render(
-                scene["field"]["path"] or None,
+                study.field_path or None,
                 case=case,
                 config=config,
                 reference=references.get(threshold),
                 progress=progress,
             )
             references[threshold] = result.reference
-            result.config[SCENE_RECORD] = comparable_scene(scene)
+            result.config[SCENE_RECORD] = comparable_scene(study)
             scene_file.settle()
             write_render(path, result, overwrite=True)
             seconds[name] = time.perf_counter() - case_start
@@ -374,9 +379,9 @@ def run_study(
             from rimcl.piv.study import run_study_cases
 
             piv_files, piv_ran = run_study_cases(
-                scene,
+                study,
                 out_dir,
-                comparable_scene(scene),
+                comparable_scene(study),
                 all_cases,
                 force=force,
                 report=say,
@@ -393,14 +398,15 @@ def run_study(
                     out_dir, stats, ran, skipped, seconds, False, time.perf_counter() - started
                 )
         say("statistics and figures" if figures else "statistics")
-        stats = write_study_outputs(out_dir, scene, case_files, figures, piv_files, progress)
+        stats = write_study_outputs(out_dir, study, case_files, figures, piv_files, progress)
     return StudyResult(out_dir, stats, ran, skipped, seconds, True, time.perf_counter() - started)
 
 
-def physical_equivalents(delta_n_max, scene):
+def physical_equivalents(delta_n_max, fluid):
     """What a case's index difference means physically (DESIGN §16): the temperature
     difference of air and of water (and the salinity difference of salt water) that gives
-    it, at the scene's fluid state (default 20 °C, 532 nm).
+    it, at the scene's fluid state (``fluid``, a :class:`rimcl.scene.config.FluidConfig`;
+    default 20 °C, 532 nm).
 
     Returns
     -------
@@ -409,22 +415,21 @@ def physical_equivalents(delta_n_max, scene):
     """
     from rimcl.fields.media import Fluid, physical_equivalent
 
-    fluid = scene["fluid"]
-    state = {"temperature_c": fluid["temperature_c"], "wavelength_nm": fluid["wavelength_nm"]}
+    state = {"temperature_c": fluid.temperature_c, "wavelength_nm": fluid.wavelength_nm}
     fluids = {
-        "air": Fluid("air", pressure_pa=fluid["pressure_pa"], **state),
+        "air": Fluid("air", pressure_pa=fluid.pressure_pa, **state),
         "water": Fluid("water", **state),
-        "saltwater": Fluid("saltwater", salinity_g_kg=fluid["salinity_g_kg"], **state),
+        "saltwater": Fluid("saltwater", salinity_g_kg=fluid.salinity_g_kg, **state),
     }
     return {name: physical_equivalent(delta_n_max, f).text for name, f in fluids.items()}
 
 
-def _numerics(scene, case, out_dir, versions):
+def _numerics(study, case, out_dir, versions):
     """Run the Appendix A check, draw its figure, and return its numbers for stats.json."""
     from rimcl.ptv.numerics import numerical_convergence
     from rimcl.stats.figures_numerics import write_numerics_figure
 
-    numerics = numerical_convergence(scene, case)
+    numerics = numerical_convergence(study, case)
     write_numerics_figure(numerics, out_dir / "figures", versions)
     runs = numerics["runs"]
     return {
@@ -435,19 +440,19 @@ def _numerics(scene, case, out_dir, versions):
     }
 
 
-def _numerics_case(scene, names):
+def _numerics_case(study, names):
     """The case of the Appendix A check (C1, else the first Gladstone–Dale case), or None
     when the scene asks for none or has no such case."""
     from rimcl.fields.cases import CASES
 
-    if not scene["run"]["numerics"]:
+    if not study.run.numerics:
         return None
     if "C1" in names:
         return "C1"
     return next((name for name in names if name in CASES or name.startswith("G=")), None)
 
 
-def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=(), progress=False):
+def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=(), progress=False):
     """``stats.json``, the figures and ``summary.md`` (last) of finished case files
     (PTV render files, PIV case files); ``progress``: a progress bar over the steps (on a
     terminal).
@@ -464,7 +469,7 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=(), 
     from rimcl.stats.render_file import load_render
     from rimcl.stats.tables import write_json
 
-    config = {"scene": scene, "study_dir": str(out_dir)}
+    config = {"scene": study.scene_record(), "study_dir": str(out_dir)}
     stats = {"cases": [], "config": config}
     # steps: each case file read, PTV statistics, PTV figures, PIV results, PIV figures,
     # the files written
@@ -481,18 +486,20 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=(), 
         all_tables = check_cases(all_tables)
         stats = compute_stats(all_tables, config=config)
         for case in stats["cases"]:
-            case["physical_equivalent"] = physical_equivalents(case["delta_n_max"], scene)
+            case["physical_equivalent"] = physical_equivalents(
+                case["delta_n_max"], study.shared.fluid
+            )
         bar.update()
         if figures:
             write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
         bar.update()
-        numerics_case = _numerics_case(scene, [t.case for t in all_tables])
+        numerics_case = _numerics_case(study, [t.case for t in all_tables])
         if figures and numerics_case is not None:
-            stats["numerics"] = _numerics(scene, numerics_case, out_dir, stats["versions"])
-        multiples = sorted(set(scene["time"]["dt_multiples"]) - {1})
+            stats["numerics"] = _numerics(study, numerics_case, out_dir, stats["versions"])
+        multiples = sorted(set(study.dt_multiples) - {1})
         if multiples:
             by_dt = sweep_stats(
-                all_tables, multiples, scene["time"], lambda t: compute_stats(t, config=config)
+                all_tables, multiples, study.shared.time, lambda t: compute_stats(t, config=config)
             )
             if by_dt:
                 by_dt[float(all_tables[0].dt)] = stats
@@ -510,7 +517,7 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=(), 
             write_piv_figures(piv_cases, out_dir / "figures", config=config, overwrite=True)
         bar.update()
     write_json(out_dir / "stats.json", stats, overwrite=True)
-    _write_text(out_dir / "summary.md", summary_markdown(stats, scene))
+    _write_text(out_dir / "summary.md", summary_markdown(stats, study))
     bar.update()
     bar.close()
     return stats

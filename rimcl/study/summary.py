@@ -266,31 +266,30 @@ def _dt_sweep_lines(sweep):
     return [*lines, ""]
 
 
-def summary_markdown(stats, scene):
+def summary_markdown(stats, study):
     """The study's summary as Markdown, beside the paper's values for air and water.
 
     Parameters
     ----------
     stats : dict
         The ``stats.json`` document.
-    scene : dict
-        The scene of the study.
+    study : rimcl.scene.study_config.StudyConfig
 
     Returns
     -------
     str
     """
-    if scene["run"]["mode"] == "piv":
+    if study.run.mode == "piv":
         return "\n".join([f"# rimcl study: {len(stats['cases'])} cases, PIV", *piv_lines(stats)])
     cases = stats["cases"]
     first = cases[0]
-    camera = scene["camera"]
+    camera, renderer = study.shared.camera, study.shared.renderer
     rays = (
-        f"plane camera, {camera['fan']}×{camera['fan']} rays per tracer"
-        if camera["kind"] == "plane"
-        else f"{camera['kind']} camera, {camera['pupil_rays']} rays per tracer"
+        f"plane camera, {camera.fan}×{camera.fan} rays per tracer"
+        if camera.kind == "plane"
+        else f"{camera.kind} camera, {camera.pupil_rays} rays per tracer"
     )
-    field = scene["field"]["path"] or "the shipped 64³ sample (buoyancy-driven mixing)"
+    field = study.field_path or "the shipped 64³ sample (buoyancy-driven mixing)"
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     devices = ", ".join(
         sorted({str(entry.get("device", {}).get("device")) for entry in stats["config"]["inputs"]})
@@ -298,8 +297,8 @@ def summary_markdown(stats, scene):
     lines = [
         f"# rimcl study: {len(cases)} cases",
         "",
-        f"rimcl {__version__}, {stamp}. Field: {field}. {scene['tracers']['count']} tracers, "
-        f"{rays}, {scene['renderer']['kind']} renderer, {scene['renderer']['pixels']} pixels "
+        f"rimcl {__version__}, {stamp}. Field: {field}. {study.shared.tracers.count} tracers, "
+        f"{rays}, {renderer.kind} renderer, {renderer.pixels} pixels "
         f"across the field of view (pixel = {first['pixel_size_over_L']:.3g} L), "
         f"L = {first['length_L']:.4g}, Δt = {first['dt']:.3g}.",
         f"Device: {devices}. Configuration: `scene.toml`; every number and the software "

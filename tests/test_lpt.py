@@ -1,0 +1,203 @@
+"""LPT: rig geometry, calibration, triangulation and the must-hold comparisons.
+
+- Uniform medium, chief rays: image points equal the pinhole-plus-window projection of the
+  truth to 1e-9 L; triangulated positions equal the truth within the calibration residual.
+- Linear medium n = n0 + g x2: the 3-D error equals the least-squares intersection of the
+  cameras' exit rays traced in float64 (straight back-extensions from the exit face) within
+  2 %.
+- Device and NumPy float64 engines agree.
+"""
+
+import numpy as np
+import pytest
+
+from rimcl.core.errors import RimclError
+from rimcl.fields.field import analytic_field
+from rimcl.lpt.calibration import (
+    PinholeModel,
+    SoloffModel,
+    calibrate,
+    intersect,
+    target_points,
+    triangulate,
+)
+from rimcl.lpt.config import RigConfig, parse_lpt_scene
+from rimcl.lpt.flow import Volume
+from rimcl.lpt.run import rig_cameras
+from rimcl.lpt.views import Tracer, chief_targets, view
+from rimcl.optics.reference import sample_field, trace_rays_reference
+
+N0 = 1.333
+LENGTH_M = 0.1  # the unit cube is 100 mm, the challenge's width
+
+
+def _volume():
+    return Volume(
+        lo=np.zeros(3),
+        hi=np.ones(3),
+        x_end=1.0,
+        seed_lo=np.array([0.35, 0.1, 0.25]),
+        seed_hi=np.array([0.65, 0.9, 0.75]),
+        periodic=False,
+    )
+
+
+def _cameras(fluid_index=N0, preset="lpt-challenge"):
+    return rig_cameras(RigConfig(preset=preset), _volume(), LENGTH_M, fluid_index)
+
+
+def _tracers(count=12, seed=3):
+    volume = _volume()
+    return volume.seed(count, np.random.default_rng(seed))
+
+
+def _box_field(kind, **params):
+    return analytic_field(kind, box_lo=[-1.0, -2.0, -2.0], box_hi=[2.0, 3.0, 3.0], **params)
+
+
+def _models(cameras, kind="soloff"):
+    volume = _volume()
+    margin = 0.05 * (volume.seed_hi - volume.seed_lo)
+    target = target_points(volume.seed_lo - margin, volume.seed_hi + margin, 5, (13, 9))
+    return [calibrate(camera, target, kind) for camera in cameras]
+
+
+def test_preset_geometry():
+    cameras = _cameras()
+    assert [c.name for c in cameras] == ["cam1", "cam2", "cam3", "cam4"]
+    centre = 0.5 * (_volume().seed_lo + _volume().seed_hi)
+    for camera, angle in zip(cameras, (-30, -10, 10, 30), strict=True):
+        # the look-at point images to the sensor centre; the axis has the preset's angle
+        np.testing.assert_allclose(camera.project(centre[None])[0], [959.5, 599.5], atol=1e-9)
+        assert np.degrees(np.arctan2(-camera.forward[1], -camera.forward[0])) == pytest.approx(
+            angle
+        )
+        # the field's 100 mm width fills 96 % of the 19.2 mm sensor: M = 0.18432
+        assert camera.magnification == pytest.approx(0.96 * 19.2 / 100.0)
+        distance = np.linalg.norm(camera.position - centre) * LENGTH_M * 1e3
+        assert 500 < distance < 700  # the challenge's ~600 mm
+    assert len(_cameras(preset="stereo")) == 2
+
+
+def test_dlt_is_exact_for_a_bare_pinhole():
+    # no window, fluid index 1: a camera is an exact pinhole, the DLT fits to rounding
+    rig = RigConfig(window_thickness_mm=0.0, outside_index=1.0)
+    camera = rig_cameras(rig, _volume(), LENGTH_M, 1.0)[1]
+    volume = _volume()
+    target = target_points(volume.seed_lo, volume.seed_hi, 4, (5, 5))
+    model = PinholeModel.fit(target, camera.project(target))
+    assert model.residual_px < 1e-8
+    points = _tracers()
+    np.testing.assert_allclose(model.project(points), camera.project(points), atol=1e-7)
+
+
+def test_intersect_closed_form():
+    truth = np.array([[0.2, -0.4, 1.5]])
+    directions = np.array([[[1.0, 0, 0]], [[0, 1.0, 0]], [[0, 0, 1.0]]])
+    starts = truth[None] - 3.0 * directions + np.array([[[0, 0.1, 0]], [[0, 0, 0]], [[0, 0, 0]]])
+    # lines x2 = -0.3 (along x1), x1 = 0.2 (along x2), x1=0.2,x2=-0.4 (along x3)
+    solved = intersect(starts, directions)
+    np.testing.assert_allclose(solved, [[0.2, -0.4 + 0.05, 1.5]], atol=1e-12)
+
+
+def test_uniform_medium_images_and_triangulation(device):
+    """K = 0: chief-ray images equal the projection of the truth to 1e-9 L, and the
+    triangulated positions equal the truth within the calibration's residual."""
+    field = _box_field("uniform", n0=N0)
+    cameras = _cameras()
+    points = _tracers()
+    tracer = Tracer(engine="device", device=device)
+    models = _models(cameras)
+    centroids = []
+    for camera in cameras:
+        seen = view(field, camera, points, 1, tracer)
+        assert np.all(seen.failed == 0)
+        exact = camera.project(points)
+        # 1e-9 L on the focus plane, in pixels
+        np.testing.assert_allclose(seen.centroid, exact, rtol=0, atol=1e-9 / camera.pixel_size)
+        # the exit ray's straight back-extension passes through the tracer
+        trace = seen.trace
+        offset = points - trace.end_pos
+        along = np.sum(offset * trace.end_dir, axis=1, keepdims=True)
+        miss = np.linalg.norm(offset - along * trace.end_dir, axis=1)
+        assert np.max(miss) < 1e-9
+        centroids.append(seen.centroid)
+    positions, disparity = triangulate(models, np.stack(centroids))
+    for camera, model in zip(cameras, models, strict=True):
+        projected = np.linalg.norm(camera.project(positions) - camera.project(points), axis=1)
+        assert np.sqrt(np.mean(projected**2)) <= model.residual_px
+        assert np.max(projected) <= 0.01
+    assert np.max(disparity) <= 0.01
+
+
+def _lines_float64(field, cameras, points, n_cal):
+    """Each camera's chief ray (the ray that reaches the pupil centre) traced in float64,
+    continued straight back from the exit face in the calibration fluid: ``E - t D'``
+    with ``D'`` the exit direction refracted at the exit face from the local index into
+    the calibration fluid's (``D' = D`` where the two agree): the line of sight of a
+    camera calibrated in that fluid."""
+    starts, directions = [], []
+    for camera in cameras:
+        targets, miss = chief_targets(field, camera, points, Tracer(engine="numpy", step=2e-3))
+        assert np.max(miss) < 1e-9
+        aim = camera.aim(points, targets[:, None]).reshape(-1, 3)
+        result = trace_rays_reference(field, points, aim, x_end=camera.x_end, step=2e-3)
+        assert np.all(result.ok)
+        n_exit = sample_field(field, result.end_pos)[0]
+        tangential = result.end_dir[:, 1:] * (n_exit / n_cal)[:, None]
+        normal = np.sqrt(1.0 - np.sum(tangential**2, axis=1))
+        starts.append(result.end_pos)
+        directions.append(np.column_stack([normal, tangential]))
+    return intersect(np.stack(starts), np.stack(directions))
+
+
+def test_linear_medium_error_equals_float64_exit_rays(device):
+    field = _box_field("linear", n0=N0, g=0.01)
+    cameras = _cameras(N0)
+    points = _tracers()
+    tracer = Tracer(engine="device", device=device)
+    models = _models(cameras)
+    centroids = np.stack([view(field, c, points, 1, tracer).centroid for c in cameras])
+    measured, _ = triangulate(models, centroids)
+    error = measured - points
+    expected = _lines_float64(field, cameras, points, N0) - points
+    size = np.linalg.norm(expected, axis=1)
+    assert np.min(size) > 20 * cameras[0].pixel_size * 0.01  # far above the calibration's
+    np.testing.assert_array_less(np.linalg.norm(error - expected, axis=1), 0.02 * size)
+
+
+def test_device_and_numpy_engines_agree(device):
+    field = _box_field("linear", n0=N0, g=0.01).on_grid([9, 17, 17], [0, -0.2, -0.2], [1, 1.2, 1.2])
+    cameras = _cameras(field.n_ref)
+    points = _tracers(6)
+    device_views = [view(field, c, points, 4, Tracer(device=device)) for c in cameras]
+    numpy_views = [view(field, c, points, 4, Tracer(engine="numpy")) for c in cameras]
+    for on_device, in_numpy in zip(device_views, numpy_views, strict=True):
+        np.testing.assert_allclose(on_device.centroid, in_numpy.centroid, rtol=0, atol=1e-5)
+    models = _models(cameras)
+    first = triangulate(models, np.stack([v.centroid for v in device_views]))[0]
+    second = triangulate(models, np.stack([v.centroid for v in numpy_views]))[0]
+    np.testing.assert_allclose(first, second, rtol=0, atol=1e-5 * cameras[0].pixel_size)
+
+
+def test_soloff_beats_pinhole_through_the_window():
+    cameras = _cameras()
+    pinhole, soloff = _models(cameras, "pinhole"), _models(cameras, "soloff")
+    for a, b in zip(pinhole, soloff, strict=True):
+        assert isinstance(b, SoloffModel)
+        assert b.residual_px < a.residual_px
+        assert b.residual_px < 0.01
+
+
+def test_scene_keys_are_checked():
+    with pytest.raises(RimclError, match="did you mean 'thickness'"):
+        parse_lpt_scene({"illumination": {"thicknes": 1.0}})
+    with pytest.raises(RimclError, match=r"rig\.preset must be one of"):
+        parse_lpt_scene({"rig": {"preset": "lpt-chalenge"}})
+    with pytest.raises(RimclError, match="does not apply to LPT"):
+        parse_lpt_scene({"camera": {"kind": "lens"}})
+    with pytest.raises(RimclError, match="needs position_mm"):
+        parse_lpt_scene({"rig": {"cameras": [{"look_at_mm": [1, 2, 3]}]}})
+    scene = parse_lpt_scene({})
+    assert scene.rig.preset == "lpt-challenge"
+    assert scene.study["cases"]["names"] == ["C1", "C2", "C3"]
