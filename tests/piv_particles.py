@@ -16,7 +16,7 @@ def render_particles(x, y, shape, sigma, brightness=1.0):
     Parameters
     ----------
     x, y : ndarray, shape (N,)
-        Particle centres (pixels).
+        Particle centres (pixels; pixel centres at integer coordinates, as rimcl's PIV).
     shape : tuple of 2 int
         Image ``(rows, columns)``.
     sigma : float
@@ -33,9 +33,10 @@ def render_particles(x, y, shape, sigma, brightness=1.0):
     brightness = np.broadcast_to(np.asarray(brightness, dtype=np.float64), x.shape)
 
     def tables(centres):
-        first = np.floor(centres).astype(np.int64)[:, None] + offsets[None, :]
-        weights = ndtr((first + 1 - centres[:, None]) / sigma) - ndtr(
-            (first - centres[:, None]) / sigma
+        # pixel centres at integer coordinates: pixel j spans [j - 1/2, j + 1/2)
+        first = np.floor(centres + 0.5).astype(np.int64)[:, None] + offsets[None, :]
+        weights = ndtr((first + 0.5 - centres[:, None]) / sigma) - ndtr(
+            (first - 0.5 - centres[:, None]) / sigma
         )
         return first, weights
 

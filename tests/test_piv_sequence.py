@@ -30,7 +30,7 @@ def test_sequence_of_a_uniform_flow_knows_its_truth(box, device, tmp_path):
     # stores the velocity in float32: 0.3 and -0.2 to 4e-8 relative)
     assert first.truth_px.shape == (2, 96, 96, 2)
     np.testing.assert_allclose(first.truth_px[..., 0], 0.3 * 0.05 / pixel, rtol=1e-7)
-    np.testing.assert_allclose(first.truth_px[..., 1], -0.2 * 0.05 / pixel, rtol=1e-7)
+    np.testing.assert_allclose(first.truth_px[..., 1], 0.2 * 0.05 / pixel, rtol=1e-7)
     np.testing.assert_allclose(first.truth_ms[..., 0], 0.3 * 0.01 / 0.5, rtol=1e-7)
     # the particle table: three exposures of the same tracers, moved by u dt each
     steps = np.diff(first.positions, axis=0)

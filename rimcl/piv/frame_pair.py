@@ -35,7 +35,8 @@ class PivFrames:
     Attributes
     ----------
     images : ndarray, uint16, shape (F, rows, columns)
-        Camera counts of each exposure (A and B of a pair).
+        Camera counts of each exposure (A and B of a pair), row 0 at the top of the view
+        (the highest ``x3``; :func:`rimcl.piv.imaging_config.frame_pixels`).
     optics : ndarray, float64, shape (F, N, 2)
         Per exposure and tracer, the light-weighted mean ``(x2, x3)`` of the image points
         of its collected rays (length units); NaN where none was collected.
@@ -278,7 +279,9 @@ def image_frames(
         counts, _ = sensor.digitize(light, scale, 0, 0, NoiseKey(noise[0], noise[1] + index, 0))
         seconds["digitize"] += time.perf_counter() - started
         saturated.append(int(np.count_nonzero(counts >= sensor.full_scale)))
-        images.append(counts.astype(np.uint16))
+        # stored with row 0 at the top of the view (highest x3), as cameras and PIV codes
+        # read images (rimcl.piv.imaging_config.frame_pixels); rendered with rows along +x3
+        images.append(counts[::-1].astype(np.uint16))
         optics.append(mean_points)
         collected.append(count)
         scales.append(float(scale))

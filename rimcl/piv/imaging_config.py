@@ -220,3 +220,39 @@ def seed_particles(scene, imaging, rng, camera=None):
     half = SEED_HALF_WIDTH * imaging.thickness(scene, camera)
     depth = scene.x_sheet + rng.uniform(-half, half, count)
     return np.column_stack([depth, in_plane])
+
+
+#: Image axes of the PIV frames in sheet axes: x (columns) along +x2, y (rows) along -x3.
+IMAGE_AXES = np.array([1.0, -1.0])
+
+
+def frame_pixels(renderer, shape, points):
+    """Sheet points ``(x2, x3)`` → PIV frame pixel coordinates ``(x, y)`` = (column, row).
+
+    The convention of every PIV output of rimcl (frames, truth, vectors, exports): row 0
+    at the top of the camera's view (the highest ``x3``), columns along ``x2``, pixel
+    centres at integer coordinates (pixel ``(row i, column j)`` at ``(j, i)``), as
+    scikit-image, trackpy and OpenPIV's image coordinates. The renderer's own grid
+    (:meth:`rimcl.imaging.render.Renderer.to_pixels`: pixel ``j`` spans ``[j, j + 1)``, rows
+    along ``+x3``) is flipped and shifted by half a pixel.
+
+    Parameters
+    ----------
+    renderer : rimcl.imaging.render.Renderer
+    shape : (int, int)
+        Frame ``(rows, columns)``.
+    points : ndarray, shape (..., 2)
+
+    Returns
+    -------
+    ndarray, float64, shape (..., 2)
+    """
+    grid = renderer.to_pixels(points)
+    return np.stack([grid[..., 0] - 0.5, shape[0] - 0.5 - grid[..., 1]], axis=-1)
+
+
+def frame_points(renderer, shape, pixels):
+    """The inverse of :func:`frame_pixels`: frame pixel coordinates → sheet ``(x2, x3)``."""
+    pixels = np.asarray(pixels, dtype=np.float64)
+    grid = np.stack([pixels[..., 0] + 0.5, shape[0] - 0.5 - pixels[..., 1]], axis=-1)
+    return renderer.to_sheet(grid)

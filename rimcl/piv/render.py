@@ -34,11 +34,11 @@ A PIV camera records full frames of many tracers lit by a light sheet of finite 
   scale), rounded and clipped to ``bit_depth`` bits; no sensor noise.
 
 Each pair is imaged twice by the same code: through the field, and through a uniform medium
-(``n = 1``, where every ray returns to its tracer). Frame arrays are ``(rows, columns)``
-with rows along ``x3`` and columns along ``x2``: pixel ``(i, j)`` covers
-``x2 ∈ fov_lo2 + [j, j+1) p``, ``x3 ∈ fov_lo3 + [i, i+1) p`` with ``p`` the pixel size (the
-convention of :mod:`rimcl.imaging.render` and :mod:`rimcl.piv.analysis`; row 0 is the lowest
-``x3``, so most viewers show ``x3`` pointing down).
+(``n = 1``, where every ray returns to its tracer). Frames are ``(rows, columns)`` stored
+with row 0 at the top of the camera's view (the highest ``x3``) and columns along ``x2``;
+pixel centres at integer coordinates (:func:`rimcl.piv.imaging_config.frame_pixels`, the
+convention of :mod:`rimcl.piv.analysis`, scikit-image, trackpy and OpenPIV's image
+coordinates), so ``dy > 0`` is motion towards lower ``x3``.
 
 The parts: :mod:`rimcl.piv.imaging_config` (imaging, sheet, seeding),
 :mod:`rimcl.piv.tracer_motion`, :mod:`rimcl.piv.frame_pair` (tracing and rendering),
@@ -410,7 +410,9 @@ def run_piv_render(
                 key={**key, "motion": motion},
                 positions=positions,
                 weights=weights,
-                truth=true_displacement(positions, renderer, grid, weights),
+                truth=true_displacement(
+                    positions, renderer, imaging.frame_shape(scene, cam), grid, weights
+                ),
                 uniform=uniform_frames,
             )
         elif {k: v for k, v in reference.key.items() if k != "motion"} != key:
@@ -445,7 +447,8 @@ def run_piv_render(
         "velocity_frames": frames,
         "n_tracers": int(reference.positions.shape[1]),
         "rays_per_batch": int(run.rays_per_batch),
-        "image_rows": "rows along x3 (row 0 lowest), columns along x2",
+        "image_rows": "row 0 at the top (highest x3), rows along -x3, columns along x2; "
+        "pixel centres at integer coordinates",
     }
     return PivRender(
         field=measured,

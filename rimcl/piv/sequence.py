@@ -10,9 +10,9 @@ either engine; sensor noise frame ``k``, pass 1).
 **Dense truth**: for every pixel centre on the sheet and every step ``k → k + 1``, the
 displacement of a fluid particle starting there at ``t_k`` (the same RK4 integration as the
 tracers'), in pixels per frame; with a length scale (metres per field length unit) and a
-time scale (seconds per field time unit) also in m/s. Pixel ``(row i, column j)`` has its
-centre where :meth:`rimcl.imaging.render.Renderer.to_sheet` puts the pixel coordinates
-``(j + 0.5, i + 0.5)`` (the convention of :mod:`rimcl.piv.render`).
+time scale (seconds per field time unit) also in m/s. Pixels as every PIV output of rimcl
+(:func:`rimcl.piv.imaging_config.frame_pixels`): row 0 at the top (highest ``x3``), pixel
+``(row i, column j)`` centred at ``(x, y) = (j, i)``, ``dy > 0`` down the frame.
 
 Files (:func:`write_piv_sequence`): per seed ``PREFIX_seed<s>_<k>.tif`` (``k`` from 000) and
 ``PREFIX_seed<s>_truth.h5`` (``rimcl_schema = "piv_sequence_truth"``): ``times`` (field
@@ -37,7 +37,12 @@ from rimcl.fields.crop import CroppedSource
 from rimcl.imaging.sensor import MEASURED_PASS
 from rimcl.piv.analysis import write_tiff
 from rimcl.piv.frame_pair import PivFrames, image_frames
-from rimcl.piv.imaging_config import seed_particles, sheet_intensity
+from rimcl.piv.imaging_config import (
+    frame_pixels,
+    frame_points,
+    seed_particles,
+    sheet_intensity,
+)
 from rimcl.piv.render import PIV_CAMERA, PivConfig, _piv_scene, _progress
 from rimcl.piv.tracer_motion import move_tracers
 from rimcl.scene.config import FluidConfig, IntegratorConfig, RunConfig, SensorConfig
@@ -115,13 +120,13 @@ def dense_truth(source, scene, renderer, shape, times, frames):
     """Displacement per pixel and frame step of fluid particles starting at the pixel
     centres on the sheet (pixels per frame), shape ``(F - 1, rows, columns, 2)``."""
     rows, cols = shape
-    col, row = np.meshgrid(np.arange(cols) + 0.5, np.arange(rows) + 0.5)
-    on_sheet = renderer.to_sheet(np.column_stack([col.ravel(), row.ravel()]))
+    col, row = np.meshgrid(np.arange(cols, dtype=np.float64), np.arange(rows, dtype=np.float64))
+    on_sheet = frame_points(renderer, shape, np.column_stack([col.ravel(), row.ravel()]))
     start = np.column_stack([np.full(len(on_sheet), scene.x_sheet), on_sheet])
     steps = []
     for k in range(len(times) - 1):
         moved, _ = move_tracers(source, scene, start, (times[k], times[k + 1]), frames)
-        pixels = renderer.to_pixels(moved[..., 1:])
+        pixels = frame_pixels(renderer, shape, moved[..., 1:])
         steps.append((pixels[1] - pixels[0]).reshape(rows, cols, 2))
     return np.stack(steps)
 
@@ -165,7 +170,7 @@ def run_piv_sequence(
     list of PivSequence
     """
     from rimcl.core.device import describe_device, select_device
-    from rimcl.ptv.measure import case_of, open_source
+    from rimcl.ptv.field_source import case_of, open_source
 
     piv = PivConfig() if piv is None else piv
     camera_config = PIV_CAMERA if camera is None else camera
@@ -249,7 +254,7 @@ def run_piv_sequence(
                     frames=made,
                     truth_px=truth_px,
                     truth_ms=truth_ms,
-                    pixels=renderer.to_pixels(positions[..., 1:]),
+                    pixels=frame_pixels(renderer, shape, positions[..., 1:]),
                     intensity=sheet_intensity(positions[..., 0], scene.x_sheet, thickness),
                     config=config,
                     device=device,

@@ -33,7 +33,7 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path, stamp_h5, to_json
 from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair
-from rimcl.piv.imaging_config import PivImaging
+from rimcl.piv.imaging_config import IMAGE_AXES, PivImaging, frame_pixels
 from rimcl.piv.render import PivConfig, run_piv_render
 from rimcl.piv.truth import window_means
 from rimcl.stats.summaries import error_summary
@@ -129,7 +129,9 @@ def optics_error(render, grid):
     """
     field, uniform = render.field.optics, render.uniform.optics
     error = ((field[1] - field[0]) - (uniform[1] - uniform[0])) / render.pixel_size
-    pixels = render.renderer.to_pixels(render.reference.positions[..., 1:])
+    error = error * IMAGE_AXES  # (x2, x3) -> image (x, y): y runs down, along -x3
+    shape = render.imaging.frame_shape(render.scene, render.camera)
+    pixels = frame_pixels(render.renderer, shape, render.reference.positions[..., 1:])
     middle = 0.5 * (pixels[0] + pixels[1])
     means, _ = window_means(grid, middle[:, 0], middle[:, 1], error, render.reference.weights)
     return means
@@ -515,7 +517,8 @@ def configs_from_study(study):
     """The PIV measurement of a study (``[piv]`` and the shared sections of its scene).
 
     The field, box, sheet, start frame, camera kind and optics, integrator, fluid, sensor,
-    Mie weights, engine, device and tracer seed are the scene's (those of the PTV cases); the camera aims
+    Mie weights, engine, device and tracer seed are the scene's (those of the PTV cases); the
+    camera aims
     ``piv.rays`` rays per tracer (a plane camera a fan of ``round(√rays)²``).
 
     Parameters
