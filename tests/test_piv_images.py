@@ -51,14 +51,15 @@ def test_sheet_profile_and_seeding_density():
 
 def test_window_means_know_which_tracers_each_window_holds():
     grid = WindowGrid.for_image((64, 64), 32, 0.5)  # corners 0, 16, 32
-    col = np.array([5.0, 20.0, 40.0, 31.999])
+    col = np.array([5.0, 20.0, 40.0, 31.499])
     row = np.array([5.0, 5.0, 50.0, 5.0])
     values = np.array([[1.0], [3.0], [7.0], [5.0]])
     weights = np.array([1.0, 1.0, 2.0, 2.0])
     means, total = window_means(grid, col, row, values, weights)
-    # window (0, 0) spans [0, 32)²: tracers 0, 1, 3
+    # window (0, 0) holds pixels 0..31, spanning [-0.5, 31.5)² (pixel centres at integers):
+    # tracers 0, 1, 3
     assert total[0, 0] == 4.0 and means[0, 0, 0] == pytest.approx((1 + 3 + 10) / 4)
-    # window (0, 1) spans columns [16, 48): tracers 1 and 3
+    # window (0, 1) spans columns [15.5, 47.5): tracers 1 and 3
     assert total[0, 1] == 3.0 and means[0, 1, 0] == pytest.approx((3 + 10) / 3)
     # tracer 2 (40, 50) lies in windows with corners (16 or 32, 32)
     assert total[2, 1] == total[2, 2] == 2.0 and means[2, 2, 0] == 7.0
