@@ -79,7 +79,7 @@ def piv():
 @click.option(
     "--outlier-eps",
     type=POSITIVE,
-    default=0.1,
+    default=0.2,
     show_default=True,
     help="eps of the normalized median test (px).",
 )

@@ -145,3 +145,53 @@ def test_openpiv_reads_the_pairs_with_the_right_signs(rotation, device):
     # after its transform_coordinates, y points up and v = +x3 motion
     _, _, _, v_up = tools.transform_coordinates(x, y, u, v)
     assert np.median(v_up) == pytest.approx(-2.0, abs=0.1)
+
+
+def _wavy_pair():
+    """A pair in a curved flow with gradients of 0.05 px/px, as the sample's at 256 px."""
+    from piv_particles import particle_pair
+
+    def wave(x, y):
+        return np.sin(2 * np.pi * y / 128), 0.8 * np.cos(2 * np.pi * x / 128)
+
+    return particle_pair(wave, (256, 256), seed=11), wave
+
+
+def test_curved_flow_keeps_its_valid_vectors():
+    # eps 0.2 px: the normalized median test leaves a smooth curved flow alone
+    (a, b), wave = _wavy_pair()
+    result = analyze_pair(a, b)
+    truth_x, truth_y = wave(result.x, result.y)
+    assert result.replaced.sum() <= 2
+    assert np.sqrt(np.mean((result.dx - truth_x) ** 2)) < 0.06
+    assert np.sqrt(np.mean((result.dy - truth_y) ** 2)) < 0.06
+
+
+def test_as_accurate_as_openpiv_window_deformation():
+    """rimcl piv analyze (defaults) against OpenPIV's windef, two passes of 32 px with
+    symmetric deformation, on the same curved-flow pair (skipped without OpenPIV)."""
+    windef = pytest.importorskip("openpiv.windef")
+    validation = pytest.importorskip("openpiv.validation")
+    filters = pytest.importorskip("openpiv.filters")
+    (a, b), wave = _wavy_pair()
+    settings = windef.PIVSettings()
+    settings.windowsizes, settings.overlap, settings.num_iterations = (32, 32), (16, 16), 2
+    frame_a, frame_b = a.astype(np.float64), b.astype(np.float64)
+    x, y, u, v, s2n = windef.first_pass(frame_a, frame_b, settings)
+    none = np.zeros_like(u, dtype=bool)
+    u, v = np.ma.masked_array(u, mask=none), np.ma.masked_array(v, mask=none)
+    flags = validation.typical_validation(u, v, s2n, settings)
+    u, v = filters.replace_outliers(u, v, flags, method="localmean", max_iter=4, kernel_size=2)
+    u, v = np.ma.masked_array(u, mask=none), np.ma.masked_array(v, mask=none)
+    x, y, u, v, _, flags = windef.multipass_img_deform(frame_a, frame_b, 1, x, y, u, v, settings)
+    u, v = filters.replace_outliers(u, v, flags, method="localmean", max_iter=4, kernel_size=2)
+    # OpenPIV's centres: a window of pixels 0..31 at 16, their centroid at 15.5
+    theirs = wave(x - 0.5, y - 0.5)
+    ours = analyze_pair(a, b)
+    truth = wave(ours.x, ours.y)
+    for mine, other, true_mine, true_other in zip(
+        (ours.dx, ours.dy), (u, v), truth, theirs, strict=True
+    ):
+        rms_ours = np.sqrt(np.mean((mine - true_mine) ** 2))
+        rms_theirs = np.sqrt(np.mean((np.ma.filled(other, np.nan) - true_other) ** 2))
+        assert rms_ours <= rms_theirs

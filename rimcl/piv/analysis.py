@@ -17,7 +17,7 @@ Usable on any image pair (``rimcl piv analyze A.tif B.tif``). The algorithm:
   ``EDGE_MARGIN`` pixels of its edge are blanked in both, so edges cut particle images at
   the same place in A' and B';
 - after every pass, the normalized median test (Westerweel & Scarano 2005, 3 x 3
-  neighbourhood, ``eps`` 0.1 px, threshold 2 on the magnitude of the two normalized
+  neighbourhood, ``eps`` 0.2 px, threshold 2 on the magnitude of the two normalized
   component residuals): outliers are flagged (``valid`` False) and replaced by the median
   of their valid neighbours (``replaced`` True).
 
@@ -87,6 +87,10 @@ class PivSettings:
         geometrically to ``window`` over the passes. Default ``window``.
     outlier_eps : float
         ``eps`` of the normalized median test (pixels), the noise floor of the residuals.
+        0.2 (the upper end of Westerweel & Scarano's 0.1–0.2): with 0.1, rendered pairs of
+        the sample's flow (gradients of ~0.05 px/px at 32 px windows) had 4 % of their
+        valid vectors replaced, mostly at the edges, and 0.102/0.105 px rms against the
+        truth instead of 0.060/0.089.
     outlier_threshold : float
         Normalized residual above which a vector is an outlier.
     """
@@ -95,7 +99,7 @@ class PivSettings:
     overlap: float = 0.5
     passes: int = 3
     first_window: int = None
-    outlier_eps: float = 0.1
+    outlier_eps: float = 0.2
     outlier_threshold: float = 2.0
 
     def __post_init__(self):
