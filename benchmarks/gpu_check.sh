@@ -3,6 +3,7 @@
 # the Python wheels rimcl needs beyond that machine's image in .whl/ (pyopencl, pytools,
 # platformdirs, siphash24, tomli_w). Results go to $OUT (default ./gpu-out).
 #
+# 0. the GPU's kernel shapes measured (rimcl bench --tune; the cache lands in $OUT);
 # 1. kernels build and `rimcl verify` passes on the GPU;
 # 2. the device tests run with the GPU as the test device;
 # 3. a fixed ray set is traced for comparison with PoCL (device_agreement.py compare);
@@ -11,7 +12,10 @@
 set -uo pipefail
 OUT=${OUT:-gpu-out}
 mkdir -p "$OUT"
+OUT=$(cd "$OUT" && pwd)  # absolute: the steps below run from /tmp
 export PYTHONUNBUFFERED=1
+# the measured kernel shapes come back with the results (and every later step uses them)
+export RIMCL_SHAPE_CACHE="$OUT/kernel_shapes.json"
 # the image ships NVIDIA's OpenCL library but registers only PoCL with the ICD loader
 [ -e /etc/OpenCL/vendors/nvidia.icd ] || echo libnvidia-opencl.so.1 > /etc/OpenCL/vendors/nvidia.icd
 python3 -m pip install -q --no-index --no-deps --no-compile --upgrade --target /tmp/site .whl/*.whl
@@ -19,9 +23,10 @@ python3 -m pip install -q --no-deps --no-build-isolation --no-compile --upgrade 
 export PYTHONPATH=/tmp/site
 repo=$(pwd)
 cd /tmp  # import the installed package, not the source tree
+python3 -m rimcl bench --tune --device nvidia 2>&1 | tee "$OUT/tune.txt"
 python3 -m rimcl devices 2>&1 | tee "$OUT/devices.txt"
 python3 -m rimcl verify --device nvidia 2>&1 | tee "$OUT/verify.txt"
-device_tests=$(cd "$repo" && ls tests/test_{trace,kernels_build,device,camera,measure,cli_core}.py \
+device_tests=$(cd "$repo" && ls tests/test_{trace,kernels_build,device,camera,measure,cli_core,shapes}.py \
     tests/test_{interp,step,auto,method,speed,engine}*.py 2>/dev/null | sed "s|^|$repo/|")
 RIMCL_TEST_DEVICE=nvidia python3 -m pytest -q -p no:cacheprovider --rootdir "$repo" $device_tests \
     2>&1 | tail -25 | tee "$OUT/tests.txt"

@@ -4,7 +4,10 @@ DESIGN §11: the machines drift by 30-40 % from minute to minute, so only ratios
 in one run mean anything. This script times, on one field and one ray set, interleaved:
 
 - the numba float64 implementation of the same method (``rimcl.optics.baseline``: trilinear,
-  same rays, same step, parallel over rays on all CPU cores);
+  same rays, same step, parallel over rays on all CPU cores), the baseline of every ratio;
+- a second numba implementation of the method written apart from the package
+  (``benchmarks/numba_independent.py``), which checks that baseline: the package's must
+  trace within 10 % of its speed or faster (issue 26), so that ratios are not inflated;
 - ``rimcl.trace_rays`` with every interpolation x precision the device supports, each
   with the kernel shape ``trace_rays`` chooses for it (warm: kernel build and field
   upload excluded);
@@ -14,8 +17,8 @@ in one run mean anything. This script times, on one field and one ray set, inter
   ``rimcl.imaging.engine.FAN_CPU_LANES``).
 
 and prints a compact table (ray-steps/s, best of the repeats; ratio = median over the
-repeats of the paired ratios to numba) plus the largest difference of r' between the
-default trace and numba, in units of L. Run it on any device:
+repeats of the paired ratios to numba, and to the independent numba code) plus the largest
+difference of r' between the default trace and numba, in units of L. Run it on any device:
 
     python benchmarks/speed.py                      # default device, 128³ field, 30720 rays
     python benchmarks/speed.py --device nvidia --json gpu.json
@@ -27,6 +30,7 @@ camera: 30 tracers in the sheet with a 32 x 32 fan each.
 """
 
 import argparse
+import importlib.util
 import statistics
 import time
 
@@ -38,14 +42,8 @@ from rimcl.core.provenance import to_json, versions
 from rimcl.imaging.engine import FAN_CPU_LANES
 from rimcl.optics.bench import synthetic_density
 from rimcl.optics.rays import fan_rays, scene_for
-from rimcl.optics.trace import (
-    CPU_LANES,
-    INTERPOLATIONS,
-    POCL_FLOAT_LANES,
-    PRECISIONS,
-    KernelShape,
-    default_kernel_shape,
-)
+from rimcl.optics.shapes import CPU_LANES, POCL_FLOAT_LANES, KernelShape, default_kernel_shape
+from rimcl.optics.trace import INTERPOLATIONS, PRECISIONS, _default_max_steps, default_step
 
 
 def make_field(name):
@@ -118,23 +116,43 @@ def main():
             kernel_shape=shape,
         )
 
-    numba_trace = None
+    numba_trace = independent = None
+    if not args.no_numba and importlib.util.find_spec("numba") is None:
+        print("numba is not installed: no numba baselines (ratios n/a)")
+        args.no_numba = True
     if not args.no_numba:
+        from numba_independent import trace_field as independent_trace
+
         from rimcl.optics.baseline import trace_rays_numba
 
         def numba_trace():
             return trace_rays_numba(field, origins, directions, x_end=x_end)
 
+        step = default_step(field)
+        limit = _default_max_steps(field, step, x_end, origins, directions)
+
+        def independent():
+            return independent_trace(
+                field, origins, directions, x_end=x_end, step=step, max_steps=limit
+            )
+
         numba_trace()  # compile (cached on disk), warm up
+        independent()
     for setting in settings:
         run(*setting)  # build, upload, warm up at the full launch size
 
     rates = {setting: [] for setting in settings}
     kernel_rates = {setting: [] for setting in settings}
     ratios = {setting: [] for setting in settings}
-    numba_rates = []
+    numba_rates, independent_rates, baseline_ratios = [], [], []
+    independent_ratios = {setting: [] for setting in settings}
     reference = baseline = None
     for _ in range(args.repeats):
+        if independent is not None:  # the two numba codes back to back: their ratio
+            (_, steps, _), independent_seconds = timed(independent)
+            baseline, numba_seconds = timed(numba_trace)
+            independent_rates.append(int(steps.sum()) / independent_seconds)
+            baseline_ratios.append(independent_seconds / numba_seconds)
         for setting in settings:
             # numba right before each setting: the pair sees the same machine load
             if numba_trace is not None:
@@ -145,6 +163,8 @@ def main():
             kernel_rates[setting].append(int(result.steps.sum()) / result.config["kernel_seconds"])
             if numba_trace is not None:
                 ratios[setting].append(numba_seconds / seconds)
+                # the independent code's time, scaled by its ratio to the baseline's
+                independent_ratios[setting].append(numba_seconds * baseline_ratios[-1] / seconds)
             if setting == default:
                 reference = result
 
@@ -159,6 +179,11 @@ def main():
             "ratio_to_numba": statistics.median(ratios[(interp, precision, shape)])
             if ratios[(interp, precision, shape)]
             else None,
+            "ratio_to_independent_numba": statistics.median(
+                independent_ratios[(interp, precision, shape)]
+            )
+            if independent_ratios[(interp, precision, shape)]
+            else None,
         }
         for interp, precision, shape in settings
     ]
@@ -172,6 +197,10 @@ def main():
         "rays": len(origins),
         "steps_per_ray": float(reference.steps.mean()),
         "numba_ray_steps_per_s": max(numba_rates) if numba_rates else None,
+        "independent_numba_ray_steps_per_s": max(independent_rates) if independent_rates else None,
+        "numba_speed_over_independent": statistics.median(baseline_ratios)
+        if baseline_ratios
+        else None,
         "max_image_difference_to_numba_L": None if agreement is None else agreement / length,
         "rows": rows,
         "versions": versions(),
@@ -182,19 +211,28 @@ def main():
         f"{report['steps_per_ray']:.0f} steps per ray (half a cell of arc)"
     )
     if numba_rates:
-        print(f"numba float64 baseline: {max(numba_rates):.3g} ray-steps/s (best)")
-    print("ray-steps/s: through rimcl.trace_rays (x numba: median of paired ratios), and in")
-    print("the kernel alone (uploads, downloads and host work excluded)")
+        print(
+            f"numba float64: rimcl.optics.baseline {max(numba_rates):.3g} ray-steps/s (best), "
+            f"independent code {max(independent_rates):.3g}; baseline speed / independent: "
+            f"{report['numba_speed_over_independent']:.2f} (median of paired runs)"
+        )
+    print("ray-steps/s: through rimcl.trace_rays (x numba, x indep: median of paired ratios to")
+    print("the two numba codes), and in the kernel alone (uploads, downloads, host work excluded)")
     print(
         f"{'interp':10s} {'prec':5s} {'rays/item':>9s} {'PoCL sw':>7s} {'ray-steps/s':>12s} "
-        f"{'x numba':>8s} {'kernel':>10s}"
+        f"{'x numba':>8s} {'x indep':>8s} {'kernel':>10s}"
     )
+
+    def ratio_text(ratio):
+        return "n/a" if ratio is None else f"{ratio:.2f}"
+
     for row in rows:
-        ratio = row["ratio_to_numba"]
         print(
             f"{row['interp']:10s} {row['precision']:5s} {row['rays_per_work_item']:9d} "
             f"{'yes' if row['pocl_switch'] else 'no':>7s} {row['ray_steps_per_s']:12.3g} "
-            f"{'-' if ratio is None else f'{ratio:.2f}':>8s} {row['kernel_ray_steps_per_s']:10.3g}"
+            f"{ratio_text(row['ratio_to_numba']):>8s} "
+            f"{ratio_text(row['ratio_to_independent_numba']):>8s} "
+            f"{row['kernel_ray_steps_per_s']:10.3g}"
         )
     if agreement is not None:
         print(f"max |r' - r'_numba| / L (trilinear f32c): {agreement / length:.2e}")

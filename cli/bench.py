@@ -28,8 +28,15 @@ def _format(key, value):
     "--out",
     "out_dir",
     type=click.Path(file_okay=False),
-    required=True,
-    help="Directory for bench.csv, bench.json and bench.png (created if missing).",
+    default=None,
+    help="Directory for bench.csv, bench.json and bench.png (created if missing); "
+    "required unless --tune.",
+)
+@click.option(
+    "--tune",
+    is_flag=True,
+    help="Measure the device's kernel shapes again (rays per work-item, PoCL switch, "
+    "work-group size), keep the fastest in the user's cache and print the measurements.",
 )
 @click.option(
     "--quick", is_flag=True, help="Short sweep: 3 steps, 1 adaptive tolerance, small ray set."
@@ -62,7 +69,7 @@ def _format(key, value):
 )
 @device_option
 @handle_errors
-def bench(out_dir, quick, field_path, cases, interps, precisions, pixels, device_spec):
+def bench(out_dir, tune, quick, field_path, cases, interps, precisions, pixels, device_spec):
     """Trace the same rays with every interpolation, precision and step (fixed and
     adaptive), measure warm ray-steps/s and the error of the image points r' against a
     float64 bspline3 fine-step reference, and chart error against cost.
@@ -75,10 +82,19 @@ def bench(out_dir, quick, field_path, cases, interps, precisions, pixels, device
     rays lost; rays turned back or leaving through the side (water) are counted.
 
     \b
-    Example:
+    Examples:
       rimcl bench --quick --out bench-out
+      rimcl bench --tune
     """
+    from rimcl.core.errors import RimclError
     from rimcl.optics.bench import bench as run
+
+    if out_dir is None and not tune:
+        raise RimclError("give --out DIR for the sweep, or --tune to measure kernel shapes")
+    if tune:
+        _tune(device_spec)
+        if out_dir is None:
+            return
 
     def split(text):
         return None if text is None else [item.strip() for item in text.split(",") if item]
@@ -112,3 +128,22 @@ def bench(out_dir, quick, field_path, cases, interps, precisions, pixels, device
     click.echo(f"\ndevice: {report['meta']['device']['device']}")
     for key in ("csv", "json", "png"):
         click.echo(f"wrote {report[key]}")
+
+
+def _tune(device_spec):
+    """Measure the kernel shapes of the device and print what was measured."""
+    from rimcl.core.device import select_device
+    from rimcl.optics.shapes import cache_path, describe_shape, tune
+
+    device = select_device(device_spec)
+    click.echo(f"measuring kernel shapes on {device.name.strip()} (trilinear f32c) ...")
+    entry = tune(device)
+    work = entry["workload"]
+    click.echo(
+        f"{work['rays']} rays, {work['field_nodes']}^3 field, best of {work['repeats']} "
+        f"kernel runs each ({entry['seconds']:.0f} s in all, builds included)"
+    )
+    click.echo(f"{'shape':40s} {'ray-steps/s':>12s}")
+    for row in sorted(entry["measurements"], key=lambda m: -m["ray_steps_per_s"]):
+        click.echo(f"{describe_shape(row):40s} {row['ray_steps_per_s']:12.3g}")
+    click.echo(f"chosen: {describe_shape(entry['shape'])}; stored in {cache_path()}")

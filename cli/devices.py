@@ -12,13 +12,29 @@ from rimcl.cli.options import handle_errors
 @handle_errors
 def devices(as_json):
     """List OpenCL platforms and devices with their P:D index (for --device)."""
-    from rimcl.core.device import list_devices
+    from rimcl.core.device import list_devices, select_device
+    from rimcl.optics.shapes import shape_in_use
 
     found = list_devices()
+    for entry in found:  # the trace kernels' shape: measured on first use, or the rule
+        entry["kernel_shape"] = (
+            shape_in_use(select_device(entry["index"])) if entry["usable"] else None
+        )
     if as_json:
         click.echo(json.dumps(found, indent=2))
         return
-    header = ("index", "platform", "device", "OpenCL", "CUs", "memory", "fp64", "images", "usable")
+    header = (
+        "index",
+        "platform",
+        "device",
+        "OpenCL",
+        "CUs",
+        "memory",
+        "fp64",
+        "images",
+        "usable",
+        "kernel shape",
+    )
     rows = [header]
     for entry in found:
         mark = "*" if entry["default"] else " "
@@ -33,6 +49,7 @@ def devices(as_json):
                 "yes" if entry["fp64"] else "no",
                 "yes" if entry["images"] else "no",
                 "yes" if entry["usable"] else f"no: {entry['problem']}",
+                _shape_text(entry["kernel_shape"]),
             )
         )
     widths = [max(len(row[i]) for row in rows) for i in range(len(header))]
@@ -40,4 +57,20 @@ def devices(as_json):
         click.echo(
             "  ".join(cell.ljust(width) for cell, width in zip(row, widths, strict=True)).rstrip()
         )
-    click.echo("* = default choice (RIMCL_DEVICE, then a GPU, then a CPU)")
+    click.echo(
+        "* = default choice (RIMCL_DEVICE, then a usable GPU, then a usable CPU; "
+        "PoCL first, newest PoCL and LLVM first)"
+    )
+    click.echo(
+        "kernel shape: rays per work-item, PoCL switch, work-group size of the trace kernels; "
+        "measured once per device on first use (rimcl bench --tune measures again), "
+        "'rule' until then"
+    )
+
+
+def _shape_text(shape):
+    if shape is None:
+        return "n/a"
+    from rimcl.optics.shapes import describe_shape
+
+    return f"{describe_shape(shape)} ({shape['source']})"

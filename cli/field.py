@@ -13,6 +13,7 @@ from rimcl.cli.options import (
     handle_errors,
     overwrite_option,
 )
+from rimcl.core.errors import RimclError
 
 _output_option = click.option(
     "-o", "--output", type=click.Path(dir_okay=False), required=True, help="Output file."
@@ -165,23 +166,93 @@ def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, sheet
     help="Density gradient to store (auto: spectral if periodic, else fd4).",
 )
 @click.option("--title", default=None, help="Title recorded in the file.")
+@click.option(
+    "--depth-axis",
+    default=None,
+    help="CF/npz data: the dimension (name or x/y/z) the camera looks along; it becomes x1.",
+)
+@click.option("--variable", default=None, help="CF/npz data: the scalar's variable name.")
+@click.option(
+    "--quantity",
+    type=click.Choice(["density", "temperature", "salinity", "index", "delta_n"]),
+    default=None,
+    help="CF/npz data: what the scalar is (default: from its name or standard_name).",
+)
+@click.option("--units", default=None, help="CF/npz data: the scalar's units (K, degC, ...).")
+@click.option(
+    "--velocity", default=None, help="CF/npz data: velocity variables along x,y,z ('u,v,w')."
+)
+@click.option(
+    "--fluid",
+    type=click.Choice(["water", "air", "saltwater"]),
+    default="water",
+    show_default=True,
+    help="Fluid whose n(T) or n(S) turns a temperature or salinity into an index.",
+)
+@click.option("--wavelength", type=POSITIVE, default=532.0, show_default=True, help="Light (nm).")
+@click.option(
+    "--base-temperature",
+    type=FINITE,
+    default=20.0,
+    show_default=True,
+    help="The fluid's temperature (°C) for a salinity field.",
+)
+@click.option("--n-ref", type=POSITIVE, default=None, help="Reference index of a delta_n field.")
 @_output_option
 @overwrite_option
 @handle_errors
 def import_(inputs, axes, crop, stride, frames, t0, dt, boundary, period, gradient, title,
-            output, overwrite):  # fmt: skip
-    """Import JHTDB cut-outs (HDF5/netCDF-4) or an .npz file as a rimcl field file.
+            depth_axis, variable, quantity, units, velocity, fluid, wavelength,
+            base_temperature, n_ref, output, overwrite):  # fmt: skip
+    """Import your own flow, or JHTDB cut-outs, as a rimcl field file.
 
-    INPUTS are cut-out files with datasets Density_<tttt> / density_<tttt> (and optionally
+    CF-convention netCDF-4/HDF5 files (and .npz files) of a temperature, salinity,
+    density, refractive index or delta_n, with their coordinates and velocity u, v, w:
+    units from the attributes; --depth-axis names the camera's depth. A temperature or
+    salinity becomes the fluid's refractive index (the file then runs "as is", case
+    delta_n).
+
+    JHTDB cut-outs: datasets Density_<tttt> / density_<tttt> (and optionally
     Velocity_<tttt>), shaped (nz, ny, nx, ncomp) with 1-D xcoor, ycoor, zcoor; one file
     per time or several times per file. Or one .npz (docs: import a flow field).
 
     \b
+      rimcl field import tank.nc --depth-axis y -o tank.h5
       rimcl field import mixing_0285.h5 mixing_0286.h5 -o jhtdb.h5
       rimcl field import cutout.nc --axes z,y,x --crop 0:128,:,: --stride 2 -o jhtdb.h5
     """
+    from rimcl.fields.cf_import import import_dataset, is_cf_input
     from rimcl.fields.jhtdb import import_flow
 
+    cf_options = (depth_axis, variable, quantity, units, velocity, n_ref)
+    if any(v is not None for v in cf_options) or is_cf_input(inputs):
+        if len(inputs) != 1:
+            raise RimclError("import one CF dataset or .npz file at a time")
+        written = import_dataset(
+            inputs[0],
+            output,
+            fluid=fluid,
+            wavelength_nm=wavelength,
+            temperature_c=base_temperature,
+            n_ref=n_ref,
+            gradient=gradient,
+            title=title,
+            overwrite=overwrite,
+            depth_axis=depth_axis,
+            variable=variable,
+            quantity=quantity,
+            units=units,
+            velocity=velocity,
+            crop=crop,
+            stride=stride,
+            frames=frames,
+            t0=t0,
+            dt=dt,
+            boundary=boundary,
+            period=period,
+        )
+        click.echo(f"wrote {written}")
+        return
     written = import_flow(
         inputs,
         output,

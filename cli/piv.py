@@ -140,13 +140,16 @@ def analyze(
         image_a, image_b, output, settings, exports, pixel_size_m, dt_s, overwrite=overwrite
     )
     rows, cols = result.dx.shape
+    invalid = int(np.count_nonzero(~result.valid))
     click.echo(
         f"{rows} x {cols} vectors ({result.window} px windows, overlap {overlap:g}), "
-        f"{int(np.count_nonzero(~result.valid))} outliers replaced"
+        f"{invalid} invalid, {int(np.count_nonzero(result.replaced))} of them replaced"
     )
-    click.echo(
-        f"mean displacement dx {np.nanmean(result.dx):.4g} px, dy {np.nanmean(result.dy):.4g} px"
-    )
+    if result.valid.any():
+        mean_x, mean_y = (float(np.mean(d[result.valid])) for d in (result.dx, result.dy))
+        click.echo(f"mean displacement of the valid vectors dx {mean_x:.4g} px, dy {mean_y:.4g} px")
+    else:
+        click.echo("mean displacement n/a: no window holds particle signal in both frames")
     times = ", ".join(f"{seconds:.3f}" for seconds in result.pass_seconds)
     click.echo(f"seconds per pass: {times}")
     click.echo("wrote " + ", ".join(str(path) for path in (output, *exports)))

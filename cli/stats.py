@@ -45,9 +45,15 @@ def echo_case_lines(stats):
     help="Output directory: stats.json and figures/ (created if missing).",
 )
 @click.option("--no-figures", is_flag=True, help="Write stats.json only.")
+@click.option(
+    "--mixed-scenes",
+    is_flag=True,
+    help="Compare render files of different scenes (pixels, tracers, fan, frames...); "
+    "refused otherwise.",
+)
 @overwrite_option
 @handle_errors
-def stats(render_files, out_dir, no_figures, overwrite):
+def stats(render_files, out_dir, no_figures, mixed_scenes, overwrite):
     """Error statistics (stats.json) and figures from rimcl render files, one per case.
 
     Relative errors are fractions; positions are in units of the traced depth L. Lines
@@ -55,6 +61,8 @@ def stats(render_files, out_dir, no_figures, overwrite):
     """
     from rimcl.stats.document import run_stats
 
-    document = run_stats(render_files, out_dir, overwrite=overwrite, figures=not no_figures)
+    document = run_stats(
+        render_files, out_dir, overwrite=overwrite, figures=not no_figures, mixed=mixed_scenes
+    )
     echo_case_lines(document)
     click.echo(f"wrote {out_dir}/stats.json" + ("" if no_figures else f" and {out_dir}/figures/"))

@@ -48,8 +48,8 @@ def _case_list(_ctx, _param, value):
 @engine_option
 @click.option(
     "--mode",
-    type=click.Choice(["ptv", "piv", "both"]),
-    help="PTV tracks, PIV frames, or both compared [run.mode].",
+    type=click.Choice(["ptv", "piv", "both", "lpt"]),
+    help="PTV tracks, PIV frames, both compared, or 3-D LPT [run.mode].",
 )
 @click.option("--force", is_flag=True, help="Redo every case and the statistics.")
 @click.option("--no-figures", is_flag=True, help="Skip the figures (stats and summary only).")
@@ -66,7 +66,11 @@ def _case_list(_ctx, _param, value):
 )
 @click.option("--tracers", type=COUNT, help="Tracers [tracers.count].")
 @click.option("--seed", type=INDEX, help="Random seed [tracers.seed].")
-@click.option("--camera", type=click.Choice(["plane", "pupil"]), help="Camera model [camera.kind].")
+@click.option(
+    "--camera",
+    type=click.Choice(["plane", "pupil", "lens"]),
+    help="Camera model [camera.kind]; lens needs field.length_m (scene or field file).",
+)
 @click.option("--fan", type=COUNT, help="Plane camera rays per side [camera.fan].")
 @click.option("--renderer", type=click.Choice(["exact", "paper"]), help="Renderer [renderer.kind].")
 @click.option("--pixels", type=COUNT, help="Pixels across [renderer.pixels].")
@@ -118,6 +122,7 @@ def study(
     all. Options override the scene's keys (named in brackets).
     """
     from rimcl.scene.load import default_scene_text, load_scene
+    from rimcl.scene.study_config import StudyConfig
     from rimcl.study.run import run_study
 
     if print_default_scene:
@@ -142,9 +147,27 @@ def study(
         "run.mode": mode,
         "run.scheduler": scheduler,
     }
-    scene = load_scene(scene_file, overrides, preset=preset)
+    study = StudyConfig.from_scene(load_scene(scene_file, overrides, preset=preset))
+    if study.run.mode == "piv":
+        ignored = [
+            option
+            for option, value in (
+                ("--tracers", tracers),
+                ("--fan", fan),
+                ("--renderer", renderer),
+                ("--pixels", pixels),
+                ("--threshold", threshold),
+                ("--engine", engine),
+            )
+            if value is not None
+        ]
+        if ignored:
+            click.echo(
+                f"note: {', '.join(ignored)} set the PTV cases, which --mode piv does not run; "
+                "PIV frames take the [piv] keys (piv.pixels, piv.rays, piv.density)"
+            )
     result = run_study(
-        scene,
+        study,
         out_dir,
         force=force,
         figures=not no_figures,
@@ -153,6 +176,19 @@ def study(
     )
     echo_case_lines({"cases": [case for case in result.stats["cases"] if "velocity" in case]})
     echo_piv_case_lines(result.stats)
+    if "lpt" in result.stats:
+        from rimcl.lpt.run import summary_lines
+
+        for line in summary_lines(result.stats["lpt"]):
+            click.echo(line)
+    else:
+        from rimcl.study.answer import answer_lines, scene_warnings
+
+        for line in answer_lines(result.stats)[2:]:
+            if line:
+                click.echo(line)
+        for warning in scene_warnings(result.stats, study):
+            click.echo(f"warning: {warning}")
     click.echo(
         f"{len(result.ran)} cases measured, {len(result.skipped)} kept; "
         f"{Path(out_dir) / 'summary.md'} and stats.json "

@@ -1,7 +1,10 @@
-"""Shared fixtures: one ``device`` per OpenCL device found (PoCL in CI).
+"""Shared fixtures: ``device``, the OpenCL device rimcl would choose (PoCL in CI).
 
-Without any OpenCL device the kernel tests are skipped, unless
-``RIMCL_REQUIRE_OPENCL=1`` (set by CI), which makes them fail instead.
+``RIMCL_TEST_DEVICE`` picks another (a spec as for ``--device``), or ``all`` runs every
+device test on every usable device. Devices that cannot build rimcl's kernels are never
+used (:func:`rimcl.core.device.build_problem` probes them in a child process). Without any
+usable OpenCL device the kernel tests are skipped, unless ``RIMCL_REQUIRE_OPENCL=1`` (set
+by CI), which makes them fail instead.
 """
 
 import os
@@ -11,24 +14,25 @@ import pytest
 from rimcl.core.errors import RimclError
 
 REQUIRE_OPENCL = os.environ.get("RIMCL_REQUIRE_OPENCL") == "1"
+# the rule-based kernel shapes: no timed tuning of a device's shapes during the suite,
+# nor a user's cached shapes (tests of the tuning set RIMCL_TUNE and RIMCL_SHAPE_CACHE)
+os.environ["RIMCL_TUNE"] = "off"
 
 
 def _devices():
     try:
-        from rimcl.core.device import _all_devices, build_problem
+        from rimcl.core.device import _all_devices, _preferred_first, build_problem, select_device
 
-        found = _all_devices()
+        wanted = os.environ.get("RIMCL_TEST_DEVICE") or None
+        if wanted == "all":
+            found = _preferred_first(_all_devices())
+            devices = [d for _, _, d in found if not build_problem(d)]
+            if not devices:
+                return [], "no OpenCL device can build rimcl's kernels (see 'rimcl devices')"
+            return devices, ""
+        return [select_device(wanted)], ""
     except (RimclError, ImportError) as exc:
         return [], str(exc)
-    wanted = os.environ.get("RIMCL_TEST_DEVICE")
-    devices = [d for _, _, d in found if not build_problem(d)]
-    if not devices:
-        return [], "no OpenCL device can compile kernels (see 'rimcl devices')"
-    if wanted:
-        from rimcl.core.device import select_device
-
-        devices = [select_device(wanted)]
-    return devices, ""
 
 
 _DEVICES, _WHY_NONE = _devices()
@@ -40,7 +44,7 @@ def _device_id(device):
 
 @pytest.fixture(scope="session", params=_DEVICES or [None], ids=_device_id)
 def device(request):
-    """Every OpenCL device in turn (``RIMCL_TEST_DEVICE`` picks one)."""
+    """The device rimcl would choose (``RIMCL_TEST_DEVICE``: another, or ``all``)."""
     if request.param is None:
         if REQUIRE_OPENCL:
             pytest.fail(f"RIMCL_REQUIRE_OPENCL=1 but no OpenCL device: {_WHY_NONE}")

@@ -1,5 +1,7 @@
 """Device selection: never interactive, explicit spec, then RIMCL_DEVICE, then GPU, then CPU."""
 
+from types import SimpleNamespace
+
 import pytest
 
 import rimcl
@@ -57,6 +59,7 @@ class _FakeDevice:
         self.name = name
         self.type = cl.device_type.GPU if kind == "gpu" else cl.device_type.CPU
         self.extensions = "cl_khr_fp64" if fp64 else "cl_khr_global_int32_base_atomics"
+        self.platform = SimpleNamespace(name=name, version="OpenCL 3.0")
 
 
 def test_the_device_engine_prefers_a_device_with_fp64(monkeypatch):
@@ -68,7 +71,7 @@ def test_the_device_engine_prefers_a_device_with_fp64(monkeypatch):
     found = [(0, 0, igpu), (1, 0, cpu)]
     monkeypatch.delenv("RIMCL_DEVICE", raising=False)
     monkeypatch.setattr(rimcl.core.device, "_all_devices", lambda: found)
-    monkeypatch.setattr(rimcl.core.device, "_usable", lambda devices: devices)
+    monkeypatch.setattr(rimcl.core.device, "build_problem", lambda device: "")
     assert rimcl.core.device.select_device() is igpu
     assert rimcl.core.device.select_device(need_fp64=True) is cpu
     found[1] = (1, 0, _FakeDevice("old", "cpu", False))

@@ -201,3 +201,33 @@ def test_scene_keys_are_checked():
     scene = parse_lpt_scene({})
     assert scene.rig.preset == "lpt-challenge"
     assert scene.study["cases"]["names"] == ["C1", "C2", "C3"]
+
+
+def test_soloff_terms_are_the_monomials():
+    from rimcl.lpt.calibration import SOLOFF_EXPONENTS, _soloff_terms
+
+    points = np.random.default_rng(5).uniform(-1, 1, (7, 3))
+    direct = np.prod(points[:, None, :] ** SOLOFF_EXPONENTS[None], axis=2)
+    np.testing.assert_allclose(_soloff_terms(points), direct, rtol=1e-14, atol=1e-15)
+    for axis in range(3):
+        step = np.zeros(3)
+        step[axis] = 1e-6
+        numeric = (_soloff_terms(points + step) - _soloff_terms(points - step)) / 2e-6
+        np.testing.assert_allclose(_soloff_terms(points, axis), numeric, rtol=0, atol=1e-8)
+
+
+def test_triangulation_of_all_frames_at_once_equals_frame_by_frame():
+    from rimcl.lpt.run import triangulate_frames
+
+    cameras = _cameras()
+    models = _models(cameras)
+    points = _tracers(30).reshape(3, 10, 3)
+    noise = np.random.default_rng(4).normal(0, 0.3, (3, len(cameras), 10, 2))
+    pixels = np.stack([[c.project(p) for c in cameras] for p in points]) + noise
+    pixels[1, 2, 4] = np.nan  # a lost image: that tracer has no position
+    positions, disparity = triangulate_frames(models, pixels)
+    for k in range(3):
+        expected = triangulate(models, pixels[k])
+        np.testing.assert_allclose(positions[k], expected[0], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(disparity[k], expected[1], rtol=0, atol=1e-9)
+    assert np.all(np.isnan(positions[1, 4])) and np.sum(np.isnan(positions)) == 3

@@ -243,6 +243,32 @@ def test_cli_render_writes_frames_and_truth(box, device, tmp_path):
     assert again.exit_code == 1 and "exists" in again.output
 
 
+def test_render_overwrite_writes_the_five_files_as_one_set(box, device, tmp_path, monkeypatch):
+    import rimcl.piv.truth
+
+    prefix = tmp_path / "run"
+    args = ["piv", "render", "--field", box, "--case", "C2", "--pixels", "96"]
+    args += ["--camera", "pupil", "--pupil-rays", "8", "--window", "16", "-o", str(prefix)]
+    assert CliRunner().invoke(cli, args).exit_code == 0
+    before = {path.name: path.read_bytes() for path in tmp_path.iterdir()}
+    assert len(before) == 5
+
+    real_file = h5py.File
+
+    def full_disk(path, mode="r", **kwargs):
+        if mode != "w":
+            return real_file(path, mode, **kwargs)
+        raise OSError(f"Unable to create file (name = '{path}', errno = 28, No space left)")
+
+    monkeypatch.setattr(rimcl.piv.truth.h5py, "File", full_disk)
+    result = CliRunner().invoke(cli, [*args, "--case", "C4", "--overwrite"])
+    assert result.exit_code == 1
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and "run_truth.h5'" in lines[0] and ".part" not in lines[0], lines
+    assert "failed, the old ones are unchanged" in lines[0]
+    assert {path.name: path.read_bytes() for path in tmp_path.iterdir()} == before
+
+
 def test_case_file_round_trip(box, device, tmp_path):
     case = run_piv_case(box, case="C4", **small(device))
     path = tmp_path / "case.h5"

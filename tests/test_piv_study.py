@@ -93,7 +93,7 @@ def test_rerun_keeps_current_piv_cases_and_redoes_foreign_ones(both, device):
     run_study(tiny_scene(device, **{"run.mode": "both"}), out, figures=False, report=lines.append)
     assert kept.stat().st_mtime_ns == stamp
     assert any("[PIV 1/2] C0: finished earlier, kept" in line for line in lines)
-    assert any("[PIV 2/2] C4: imaging and correlating" in line for line in lines)
+    assert "[PIV 2/2] C4: C4.h5 made for another scene; imaging and correlating again" in lines
     # PTV cases are kept too: switching the mode is not another scene
     assert any("C0: finished earlier, kept" in line and "PIV" not in line for line in lines)
 
@@ -162,3 +162,31 @@ def test_vectors_of_overlapping_windows_are_resampled_together():
         low, high = vector_errors(table, "meas", "ref", groups)["u2"]["ci95"]["systematic"]
         width[name] = high - low
     assert 1.7 < width["blocks"] / width["vectors"] < 2.4
+
+
+def test_a_kept_piv_file_of_another_case_is_measured_again(both, device):
+    out, _, _ = both
+    misplaced = study_case_path(out, "C4")
+    misplaced.write_bytes(study_case_path(out, "C0").read_bytes())  # C0's numbers under C4
+    lines = []
+    run_study(tiny_scene(device, **{"run.mode": "both"}), out, figures=False, report=lines.append)
+    assert "[PIV 2/2] C4: C4.h5 holds case 'C0', not 'C4'; imaging and correlating again" in lines
+    with h5py.File(misplaced) as h5:
+        assert h5.attrs["case"] == "C4"
+
+
+@pytest.mark.parametrize(
+    "keys, message",
+    [
+        ({"piv.window": 31}, "even number of pixels"),
+        ({"piv.pixels": 24, "piv.window": 32}, "does not fit"),
+        ({"run.scheduler": "local:0"}, "local:N with N >= 1"),
+    ],
+)
+def test_a_failed_piv_study_leaves_nothing_that_refuses_the_corrected_rerun(
+    device, tmp_path, keys, message
+):
+    out = tmp_path / "study"
+    with pytest.raises(RimclError, match=message):
+        run_study(tiny_scene(device, **{"run.mode": "piv", **keys}), out, figures=False)
+    assert not (out / "scene.toml").exists()

@@ -205,3 +205,17 @@ def test_a_failed_scene_does_not_lock_the_directory(device, tmp_path):
     result = run_study(good, out, figures=False)  # no --force needed
     assert result.ran == ["C1"]
     assert (out / "scene.toml").read_text() == scene_text(good)
+
+
+@pytest.mark.parametrize("folder", ["cases", "piv", "shards", "figures", "shards/C1"])
+def test_a_study_folder_that_is_a_symbolic_link_is_refused(device, tmp_path, folder):
+    out, outside = tmp_path / "study", tmp_path / "elsewhere"
+    outside.mkdir()
+    stale = outside / ".C1.h5.abcdefgh.part"  # would be removed as a study's partial file
+    stale.write_bytes(b"not the study's")
+    (out / folder).parent.mkdir(parents=True)
+    (out / folder).symlink_to(outside, target_is_directory=True)
+    with pytest.raises(RimclError, match=rf"{folder} is a symbolic link \(to .*elsewhere\)"):
+        run_study(tiny(device, **{"run.mode": "both"}), out, figures=False)
+    assert stale.read_bytes() == b"not the study's" and sorted(outside.iterdir()) == [stale]
+    assert not (out / "scene.toml").exists() and not (out / MARKER).exists()

@@ -282,10 +282,10 @@ def test_a_step_larger_than_the_field_is_refused(device):
 
 @pytest.mark.parametrize("boundary", ["periodic", "clamp"])
 def test_straight_rays_are_what_the_integrator_traces_in_a_uniform_field(device, boundary):
-    """rimcl.optics.trace.straight_rays (the reference medium's closed form) against the
+    """rimcl.optics.straight.straight_rays (the reference medium's closed form) against the
     float64 trace: the same status for rays that end well inside, well past the side, or
     move away from the exit plane, and the same exit points and image points."""
-    from rimcl.optics.trace import straight_rays
+    from rimcl.optics.straight import straight_rays
 
     field = rimcl.Field.from_arrays(
         np.zeros((16, 16, 16), dtype=np.float32), spacing=(0.1, 0.1, 0.1), boundary=boundary
@@ -319,7 +319,8 @@ def test_straight_rays_are_what_the_integrator_traces_in_a_uniform_field(device,
 
 
 def test_a_straight_ray_whose_exit_overflows_is_non_finite_never_ok():
-    from rimcl.optics.trace import STATUS_NAMES, straight_rays
+    from rimcl.optics.straight import straight_rays
+    from rimcl.optics.trace import STATUS_NAMES
 
     field = rimcl.Field.from_arrays(
         np.zeros((4, 4, 4), dtype=np.float32), spacing=(0.1, 0.1, 0.1), boundary="periodic"
@@ -335,11 +336,12 @@ def test_a_straight_ray_whose_exit_overflows_is_non_finite_never_ok():
 @pytest.mark.parametrize("precision", ["f32", "f32c"])
 def test_every_kernel_shape_traces_the_same_bits(device, periodic, precision):
     """Rays side by side in vector lanes (the structure-of-arrays sampler of 8 and 16
-    lanes on PoCL, the lane-by-lane one otherwise) are traced exactly as one ray per
-    work-item: the same operations in the same order. 37 rays leave some lanes empty;
+    lanes on PoCL, the lane-by-lane one otherwise), in work-groups of any size, are traced
+    exactly as one ray per work-item: the same operations in the same order (so the
+    shape measured per device never changes results). 37 rays leave some lanes empty;
     rays that leave the box through a side finish while their neighbours keep running."""
     from rimcl.core.device import is_pocl
-    from rimcl.optics.trace import KernelShape
+    from rimcl.optics.shapes import KernelShape
 
     field = smooth_random_field(3e-3, periodic=periodic, seed=5)
     rng = np.random.default_rng(3)
@@ -349,6 +351,8 @@ def test_every_kernel_shape_traces_the_same_bits(device, periodic, precision):
     directions = _fan(count, 0.9, seed=4)
     pocl = is_pocl(device)
     shapes = [KernelShape(lanes, pocl) for lanes in (1, 4, 8, 16)] + [KernelShape(8, False)]
+    # a work-group size that leaves a surplus work-item (3 of 16 lanes -> a group of 4)
+    shapes.append(KernelShape(16, pocl, group=4))
     results = [
         rimcl.trace_rays(
             field,

@@ -1,7 +1,17 @@
 """OpenCL device selection. Never interactive.
 
 Order of choice: an explicit ``spec``; else the ``RIMCL_DEVICE`` environment variable;
-else the first GPU; else the first CPU (PoCL).
+else the first usable GPU; else the first usable CPU. Among devices of one type, PoCL
+devices come first, the newest PoCL (then LLVM) first: a machine with the distribution's
+PoCL (3.1, LLVM 15) and the pip wheel's (3.0-rc2, LLVM 14) uses the distribution's
+whatever order the ICD loader lists them in, because the older LLVM does not know newer
+CPUs (it builds for a generic or older target, or fails) and the release candidate
+miscompiles rimcl's kernels on some of them. Other devices follow in the loader's order.
+
+A device is usable when it builds what the engines build (:func:`build_problem`): every
+kernel file in its default shape, in a child process, since a driver that fails may also
+abort the process that asked (PoCL 3.0 on an AMD Zen 4). The answer is kept on disk per
+device, driver and kernel sources (:func:`probe_cache_dir`), so the probe runs once.
 
 A ``spec`` is either ``P:D`` (platform and device index, as listed by
 ``rimcl devices``), ``P`` (first device of platform ``P``), or a case-insensitive
@@ -9,7 +19,14 @@ substring of the platform or device name (``pocl``, ``nvidia``, ``h100``).
 """
 
 import functools
+import hashlib
+import json
 import os
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
 
 from rimcl.core.errors import RimclError
 
@@ -45,25 +62,172 @@ def _all_devices():
     return found
 
 
-_PROBE_SOURCE = "__kernel void probe(__global float *a) { a[0] = sqrt(a[1]); }"
+#: Seconds the child process may take to build every kernel file (a first build on a
+#: loaded 2-core Xeon took 13 s; PoCL's own cache makes later ones fast).
+PROBE_TIMEOUT_S = 300
+#: Where rimcl installs its system PoCL from, for the message when nothing can build.
+INSTALL_HELP = (
+    "install the distribution's PoCL (Debian/Ubuntu: apt-get install pocl-opencl-icd, or "
+    "bash tools/install-system-pocl.sh)"
+)
+
+
+def probe_builds(device):
+    """What the probe builds on ``device``: the engines' kernel files in their default shape.
+
+    Returns
+    -------
+    list of (str, list of str, dict)
+        ``(file, kernel names, defines)``: the CPU shape (8 and 16 lanes, PoCL's fast
+        path) on PoCL, one ray per work-item elsewhere.
+    """
+    lanes = {"RIMCL_POCL_FAST": 1} if is_pocl(device) else {}
+    trace = {"RIMCL_PRECISION": 1, "RIMCL_FIELD": 0, "RIMCL_INTERP": 0}
+    return [
+        ("trace.cl", ["trace_rays"], {**trace, **lanes, "RIMCL_LANES": 8 if lanes else 1}),
+        (
+            "fan.cl",
+            ["trace_fan", "fan_directions"],
+            {**trace, **lanes, "RIMCL_CAMERA": 0, "RIMCL_LANES": 16 if lanes else 1},
+        ),
+        ("image.cl", ["image_tracers"], {"RIMCL_RENDERER": 0, "RIMCL_CENTROID": 0, **lanes}),
+    ]
+
+
+def _identity(device):
+    """What tells a device and its driver apart, across processes."""
+    return " | ".join(
+        text.strip()
+        for text in (
+            device.platform.name,
+            device.platform.version,
+            device.name,
+            device.driver_version,
+        )
+    )
+
+
+def probe_cache_dir():
+    """Directory of the probe's answers: ``$RIMCL_CACHE_DIR``, else ``$XDG_CACHE_HOME/rimcl``,
+    else ``~/.cache/rimcl``."""
+    if os.environ.get("RIMCL_CACHE_DIR"):
+        return Path(os.environ["RIMCL_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "rimcl"
+
+
+def _probe_key(device, builds):
+    import pyopencl as cl
+
+    from rimcl.core.program import kernel_dir
+
+    digest = hashlib.sha256()
+    for text in (_identity(device), json.dumps(builds, sort_keys=True), cl.VERSION_TEXT):
+        digest.update(text.encode() + b"\0")
+    for path in sorted(kernel_dir().iterdir(), key=lambda p: p.name):
+        if path.name.endswith((".cl", ".h")):
+            digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:24]
+
+
+def _probe_command():
+    """The child process that builds the kernels (reads the request on stdin)."""
+    return [sys.executable, "-m", "rimcl.core.device"]
+
+
+def _first_error(text):
+    """The line of a build log or crash output that says what failed."""
+    lines = [line.strip() for line in str(text).splitlines() if line.strip()]
+    for marks in (("error:",), ("error", "failed")):
+        for line in lines:
+            if any(mark in line.lower() for mark in marks):
+                return line[:200]
+    return (lines[-1] if lines else "no output")[:200]
+
+
+def _probe_in_child(device, builds):
+    request = json.dumps({"identity": _identity(device), "builds": builds})
+    try:
+        done = subprocess.run(
+            _probe_command(),
+            input=request,
+            capture_output=True,
+            text=True,
+            timeout=PROBE_TIMEOUT_S,
+            check=False,
+        )
+    except subprocess.TimeoutExpired:
+        return None, f"building rimcl's kernels did not finish within {PROBE_TIMEOUT_S} s"
+    for line in reversed(done.stdout.splitlines()):
+        if line.startswith("{"):
+            with_answer = json.loads(line)
+            return with_answer["problem"], with_answer["problem"]
+    if done.returncode < 0:
+        try:
+            how = signal.Signals(-done.returncode).name
+        except ValueError:
+            how = f"signal {-done.returncode}"
+    else:
+        how = f"exit {done.returncode}"
+    problem = f"building rimcl's kernels crashed ({how}): {_first_error(done.stderr)}"
+    return problem, problem
 
 
 @functools.cache
 def build_problem(device):
-    """Why ``device`` cannot compile OpenCL C, or ``""`` if it can.
+    """Why ``device`` cannot build rimcl's kernels, or ``""`` if it can.
 
-    Some drivers list devices they cannot compile for: the PoCL 3.0 of the pip wheel
-    (LLVM 14) fails with "unknown target CPU 'generic'" on CPUs newer than its LLVM
-    (AMD Zen 5, for one). Such devices are skipped by :func:`select_device`.
+    Builds every kernel file in its default shape (:func:`probe_builds`) and creates
+    its kernels, in a child process: some drivers list devices they cannot compile for
+    (the pip wheel's PoCL 3.0, LLVM 14: "unknown target CPU 'generic'" on AMD Zen 5; on
+    Zen 4 a failed build of ``fma`` on ``double8``, then ``clCreateKernel`` failing with
+    INVALID_KERNEL_NAME and an abort when the process exits). Such devices are skipped by
+    :func:`select_device`. The answer is cached on disk (:func:`probe_cache_dir`), keyed
+    by the device, its driver, pyopencl and the kernel sources.
     """
+    builds = probe_builds(device)
+    path = probe_cache_dir() / f"device-probe-{_probe_key(device, builds)}.json"
+    try:
+        return json.loads(path.read_text())["problem"]
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    keep, problem = _probe_in_child(device, builds)
+    if keep is not None:
+        from rimcl.core.provenance import atomic_path
+
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(path, overwrite=True) as tmp:
+                Path(tmp).write_text(json.dumps({"device": _identity(device), "problem": keep}))
+        except OSError:
+            pass  # a read-only home: the probe runs again next time
+    return problem
+
+
+def _probe_child():
+    """The child of :func:`build_problem`: build what stdin asks on the device it names,
+    print ``{"problem": ...}`` (a crash prints nothing: the parent reads the exit)."""
     import pyopencl as cl
 
-    try:
-        cl.Program(cl.Context([device]), _PROBE_SOURCE).build()
-    except cl.Error as exc:
-        lines = [line.strip() for line in str(exc).splitlines() if "error" in line.lower()]
-        return (lines[-1] if lines else str(exc).splitlines()[0])[:200]
-    return ""
+    from rimcl.core.program import kernel_dir
+
+    request = json.loads(sys.stdin.read())
+    found = [d for _, _, d in _all_devices() if _identity(d) == request["identity"]]
+    if not found:
+        print(json.dumps({"problem": "the device is not found again in a child process"}))
+        return
+    context = cl.Context([found[0]])
+    for filename, kernels, defines in request["builds"]:
+        options = [f"-I{kernel_dir()}", *(f"-D{k}={v}" for k, v in sorted(defines.items()))]
+        try:
+            program = cl.Program(context, f'#include "{filename}"\n').build(options=options)
+            for name in kernels:
+                cl.Kernel(program, name)
+        except cl.Error as exc:
+            problem = f"{filename}: {_first_error(exc)}"
+            print(json.dumps({"problem": problem}), flush=True)
+            return
+    print(json.dumps({"problem": ""}), flush=True)
 
 
 def has_fp64(device):
@@ -132,13 +296,36 @@ def _usable(found):
     usable = [entry for entry in found if not build_problem(entry[2])]
     if not usable:
         problems = "; ".join(
-            f"{device.name.strip()}: {build_problem(device)}" for _, _, device in found
+            f"{device.name.strip()} ({device.platform.version.strip()}): {build_problem(device)}"
+            for _, _, device in found
         )
-        raise RimclError(
-            f"no OpenCL device can compile kernels ({problems}); the pip PoCL is too old for "
-            "this CPU: install the system one (Debian/Ubuntu: apt-get install pocl-opencl-icd)"
-        )
+        raise RimclError(f"no OpenCL device can build rimcl's kernels ({problems}); {INSTALL_HELP}")
     return usable
+
+
+def pocl_versions(device):
+    """``(PoCL version, LLVM version)`` of a PoCL device, or None for another driver.
+
+    Versions are tuples ``(major, minor, patch, release)``, ``release`` 0 for a release
+    candidate ("3.0-rc2") and 1 otherwise, so that they order as releases do.
+    """
+    if not is_pocl(device):
+        return None
+    text = device.platform.version
+
+    def version(name):
+        found = re.search(name + r" (\d+)(?:\.(\d+))?(?:\.(\d+))?(-rc\d*)?", text)
+        if found is None:
+            return (0, 0, 0, 0)
+        numbers = tuple(int(part or 0) for part in found.groups()[:3])
+        return (*numbers, 0 if found.group(4) else 1)
+
+    return version("PoCL"), version("LLVM")
+
+
+def _preferred_first(found):
+    """``found`` with PoCL devices first, newest PoCL then LLVM first; the rest in order."""
+    return sorted(found, key=lambda entry: pocl_versions(entry[2]) or (), reverse=True)
 
 
 def _match(spec, found):
@@ -164,7 +351,8 @@ def _match(spec, found):
 def select_device(spec=None, need_fp64=False):
     """Choose an OpenCL device without asking.
 
-    Without a spec (nor ``$RIMCL_DEVICE``): the first usable GPU, then CPU; with
+    Without a spec (nor ``$RIMCL_DEVICE``): the first usable GPU, then CPU (PoCL devices
+    first among them, newest first: module docstring); with
     ``need_fp64`` (the device engine) the first usable GPU, then CPU, with ``cl_khr_fp64``
     comes first (a laptop's integrated GPU often lacks it).
 
@@ -185,19 +373,31 @@ def select_device(spec=None, need_fp64=False):
     found = _all_devices()
     if spec is None:
         spec = os.environ.get("RIMCL_DEVICE") or None
+    found = _preferred_first(found)
     if spec is not None:
         device = _match(str(spec), found)
         if build_problem(device):
             # the spec may match several platforms (two PoCL installs): take a usable one
-            device = _match(str(spec), _usable(found))
+            usable = [entry for entry in found if not build_problem(entry[2])]
+            try:
+                return _match(str(spec), usable)
+            except RimclError:
+                raise RimclError(
+                    f"OpenCL device {device.name.strip()} ({spec}) cannot build rimcl's "
+                    f"kernels ({build_problem(device)}); choose another (see 'rimcl "
+                    f"devices') or {INSTALL_HELP}"
+                ) from None
         return device
-    found = _usable(found)
     for fp64 in (True, False) if need_fp64 else (False,):
         for wanted in (cl.device_type.GPU, cl.device_type.CPU):
             for _, _, device in found:
-                if device.type & wanted and (has_fp64(device) or not fp64):
+                if (
+                    device.type & wanted
+                    and (has_fp64(device) or not fp64)
+                    and not build_problem(device)
+                ):
                     return device
-    return found[0][2]
+    return _usable(found)[0][2]
 
 
 @functools.cache
@@ -216,3 +416,7 @@ def context_for(device):
 def queue_for(device):
     """The one shared in-order command queue of ``device``."""
     return _context_and_queue(device)[1]
+
+
+if __name__ == "__main__":
+    _probe_child()

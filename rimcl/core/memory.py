@@ -132,7 +132,7 @@ def host_available():
     return int(min(found)) if found else 2**62
 
 
-def check_host(needed, what):
+def check_host(needed, what, hint=""):
     """Refuse, before allocating, ``needed`` bytes of host memory that are not there.
 
     Parameters
@@ -142,17 +142,19 @@ def check_host(needed, what):
     what : str
         What needs them, for the message (e.g. ``"frame 0 of f.h5 (1024 x 1024 x 1024
         nodes)"``).
+    hint : str
+        What would need less, appended after a colon (e.g. ``"use a larger --window"``).
 
     Raises
     ------
     RimclError
-        ``"<what> needs about N GiB of memory, but only M GiB is available"``.
+        ``"<what> needs about N GiB of memory, but only M GiB is available[: hint]"``.
     """
     available = host_available()
     if not math.isfinite(needed) or needed > available:
         raise RimclError(
             f"{what} needs about {format_bytes(needed)} of memory, but only "
-            f"{format_bytes(available)} is available"
+            f"{format_bytes(available)} is available" + (f": {hint}" if hint else "")
         )
 
 

@@ -38,8 +38,17 @@ def _build(context, filename, define_items, extra_options):
     options = [f"-I{kernel_dir()}", *_define_options(dict(define_items)), *extra_options]
     try:
         return cl.Program(context, source).build(options=options)
-    except cl.RuntimeError as exc:
-        raise RimclError(f"OpenCL build of {filename} failed:\n{exc}") from exc
+    except cl.Error as exc:
+        # one line: the compiler's first error (the whole log with rimcl -v)
+        first = next(
+            (line.strip() for line in str(exc).splitlines() if "error:" in line.lower()),
+            str(exc).splitlines()[0] if str(exc) else type(exc).__name__,
+        )
+        device = context.devices[0].name.strip()
+        raise RimclError(
+            f"OpenCL build of {filename} failed on {device}: {first}; another device "
+            "(--device, see 'rimcl devices') or the distribution's PoCL may build it"
+        ) from exc
 
 
 def build_program(context, filename, defines=None, options=()):
@@ -68,4 +77,11 @@ def get_kernel(program, name):
     """Fetch a kernel object once per program (``cl.Kernel`` is not free)."""
     import pyopencl as cl
 
-    return cl.Kernel(program, name)
+    try:
+        return cl.Kernel(program, name)
+    except cl.Error as exc:  # INVALID_KERNEL_NAME from a build that lost the kernel
+        device = program.devices[0].name.strip()
+        raise RimclError(
+            f"OpenCL kernel {name} cannot be created on {device} ({exc}); another device "
+            "(--device, see 'rimcl devices') or the distribution's PoCL may build it"
+        ) from exc

@@ -171,7 +171,7 @@ class Field:
     def is_uniform(self):
         """δn and ∇n are zero everywhere: rays go straight.
 
-        (:func:`rimcl.optics.trace.straight_rays` then skips the integrator.)
+        (:func:`rimcl.optics.straight.straight_rays` then skips the integrator.)
         """
         return not (np.any(self.delta_n) or np.any(self.gradient))
 

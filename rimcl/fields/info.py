@@ -112,6 +112,12 @@ def describe_field_file(path, values=False):
             "title": ff.attrs.get("title", ""),
             "source": ff.attrs.get("source", ""),
             "kind": ff.kind,
+            # what the stored scalar was made from, and the field's physical scales
+            "scalar": ff.attrs.get("scalar"),
+            "scalar_units": ff.attrs.get("scalar_units"),
+            "axes": ff.attrs.get("axes"),
+            "length_m": ff.attrs.get("length_m"),
+            "time_s": ff.attrs.get("time_s"),
             "shape_n3_n2_n1": [n3, n2, n1],
             "spacing": ff.spacing.tolist(),
             "origin": ff.origin.tolist(),
@@ -168,9 +174,17 @@ def format_description(info):
         + ", ".join(f"{t:.6g}" for t in info["times"][:8])
         + (" ..." if info["n_frames"] > 8 else ""),
         f"  holds     {info['kind']}"
+        + (
+            f" (from {info['scalar']} in {info['scalar_units']}, axes {info['axes']})"
+            if info.get("scalar") and info["scalar"] != info["kind"]
+            else ""
+        )
         + (" + density_gradient" if info["has_density_gradient"] else "")
         + (" + velocity" if info["has_velocity"] and sheet is None else "")
         + (f" + velocity_sheet (u2, u3 on x1 = {sheet:g})" if sheet is not None else ""),
+        "  units     "
+        + (f"length {info['length_m']:g} m" if info.get("length_m") else "length: field units")
+        + (f", time {info['time_s']:g} s" if info.get("time_s") else ", time: field units"),
         f"  memory    file {_mib(info['file_bytes'])}; per frame as a field: "
         f"{_mib(info['memory_bytes_per_frame']['field_trilinear'])} (trilinear), "
         f"{_mib(info['memory_bytes_per_frame']['field_bspline3'])} (bspline3)",

@@ -39,14 +39,14 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.imaging.device import DeviceImager, profiling_queue, require_fp64
 from rimcl.optics.camera import LensCamera, PlaneCamera, PupilCamera
+from rimcl.optics.shapes import default_kernel_shape, tuned_entry
+from rimcl.optics.straight import straight_rays
 from rimcl.optics.trace import (
     _RAY_OUT_STRIDE,
     _finish,
     _validate_rays,
-    default_kernel_shape,
     plan_steps,
     prepare_launch,
-    straight_rays,
 )
 
 _CAM_COUNT = 23  # camera block of cl/fan.cl (CAM_* there)
@@ -298,12 +298,16 @@ class FanStage:
         return kernel, launch, plan
 
     def shape(self):
-        """Rays per work-item of the fan kernel: :data:`FAN_CPU_LANES` on CPUs."""
+        """The fan kernel's shape: the device's measured trace shape (the fan kernel's hot
+        loop is the trace's, rimcl.optics.shapes), else :data:`FAN_CPU_LANES` on CPUs;
+        work-groups of :data:`FAN_GROUP` unless a size was measured."""
         import pyopencl as cl
 
         shape = default_kernel_shape(self.device)
-        if self.device.type & cl.device_type.CPU:
+        if tuned_entry(self.device) is None and self.device.type & cl.device_type.CPU:
             shape = dataclasses.replace(shape, lanes=FAN_CPU_LANES)
+        if shape.group is None:
+            shape = dataclasses.replace(shape, group=FAN_GROUP)
         return shape
 
 
@@ -502,8 +506,9 @@ class DeviceEngine:
             *self.fan.straight_args,
         )
         items = -(-n_rays // launch.shape.lanes)
-        items = -(-items // FAN_GROUP) * FAN_GROUP
-        fan_event = cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), (FAN_GROUP,))
+        group = launch.shape.group
+        items = -(-items // group) * group
+        fan_event = cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), (group,))
         events = []
         if sample_rays is not None and len(sample_rays):
             host["sample_out"] = np.empty((len(sample_rays), _RAY_OUT_STRIDE), dtype=np.float32)

@@ -21,7 +21,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.imaging.device import profiling_queue, require_fp64
-from rimcl.imaging.engine import FAN_GROUP, FanStage, event_seconds
+from rimcl.imaging.engine import FanStage, event_seconds
 from rimcl.optics.trace import STATUS_NAMES
 
 #: Tile side of ``cl/frame.cl`` (pixels): one work-item per tile; 32 gives a 1024² frame
@@ -225,8 +225,9 @@ class DeviceFrames:
             *self.fan.straight_args,
         )
         items = -(-n_rays // launch.shape.lanes)
-        items = -(-items // FAN_GROUP) * FAN_GROUP
-        fan_event = cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), (FAN_GROUP,))
+        group = launch.shape.group
+        items = -(-items // group) * group
+        fan_event = cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), (group,))
         ray_pixel, _, ray_code = self.ray_buffers
         self.rows_kernel.set_args(
             ray_pixel,

@@ -132,15 +132,23 @@ class PinholeModel:
 
 def _soloff_terms(normalised, derivative=None):
     """Soloff terms (M, 19) at normalised ``(x, y, z)`` (M, 3), or their derivative along
-    axis ``derivative`` (0, 1, 2 for x, y, z)."""
+    axis ``derivative`` (0, 1, 2 for x, y, z).
+
+    Built from a table of powers ``x^0 … x^3`` per axis (products, no ``**``): the Newton
+    loops of :meth:`SoloffModel.on_plane` evaluate it for every tracer and iteration.
+    """
     exponents = SOLOFF_EXPONENTS
-    factor = np.ones(len(exponents))
+    powers = np.empty((3, 4, len(normalised)))  # axis, power, point: contiguous rows
+    powers[:, 0] = 1.0
+    for order in range(1, 4):
+        powers[:, order] = powers[:, order - 1] * normalised.T
+    factor = None
     if derivative is not None:
-        factor = exponents[:, derivative].astype(np.float64)
-        exponents = exponents - np.eye(3, dtype=int)[derivative]
-        exponents = np.maximum(exponents, 0)
-    powers = normalised[:, None, :] ** exponents[None, :, :]
-    return factor * np.prod(powers, axis=2)
+        factor = exponents[:, derivative].astype(np.float64)[:, None]
+        exponents = np.maximum(exponents - np.eye(3, dtype=int)[derivative], 0)
+    terms = powers[0, exponents[:, 0]] * powers[1, exponents[:, 1]]
+    terms *= powers[2, exponents[:, 2]]
+    return (terms if factor is None else terms * factor).T
 
 
 @dataclasses.dataclass(frozen=True)
@@ -197,18 +205,34 @@ class SoloffModel:
 
     def on_plane(self, pixels, x1, start):
         """Points on planes ``x1`` (M,) that map to ``pixels`` (M, 2), by Newton from
-        ``start`` (M, 3). NaN where Newton does not converge."""
+        ``start`` (M, 3), all points at once (each stops when its step is below 1e-12 of
+        the box). NaN where Newton does not converge."""
         pixels = np.asarray(pixels, dtype=np.float64)
         points = np.array(start, dtype=np.float64)
         points[:, 0] = x1
         good = np.all(np.isfinite(pixels), axis=1) & np.all(np.isfinite(points), axis=1)
         chosen, target = points[good], pixels[good]
+        active = np.arange(len(chosen))
+        tolerance = 1e-12 * self.half[1:]
         for _ in range(_NEWTON_ITERATIONS):
-            residual = self.project(chosen) - target
-            step = np.linalg.solve(self._jacobian_lateral(chosen), residual[..., None])[..., 0]
-            chosen[:, 1:] -= step
-            if np.all(np.abs(step) <= 1e-13 * (1.0 + np.abs(chosen[:, 1:]))):
+            if not active.size:
                 break
+            moving = chosen[active]
+            residual = self.project(moving) - target[active]
+            jacobian = self._jacobian_lateral(moving)
+            # the 2 x 2 systems solved in closed form (Cramer), all at once
+            a, b = jacobian[:, 0, 0], jacobian[:, 0, 1]
+            c, d = jacobian[:, 1, 0], jacobian[:, 1, 1]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                determinant = a * d - b * c
+                step = np.column_stack(
+                    [
+                        (d * residual[:, 0] - b * residual[:, 1]) / determinant,
+                        (a * residual[:, 1] - c * residual[:, 0]) / determinant,
+                    ]
+                )
+            chosen[active, 1:] = moving[:, 1:] - step
+            active = active[~np.all(np.abs(step) <= tolerance, axis=1)]
         chosen[~np.all(np.abs(self.project(chosen) - target) < 1e-6, axis=1)] = np.nan
         points[good] = chosen
         points[~good] = np.nan

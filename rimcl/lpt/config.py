@@ -1,7 +1,8 @@
 """The LPT scene: ``[rig]`` (cameras), ``[illumination]`` (the seeded slab) and ``[lpt]``.
 
 An LPT scene is a TOML file with these three sections plus the study's ``[field]``,
-``[cases]``, ``[tracers]``, ``[time]``, ``[integrator]``, ``[run]`` and ``[fluid]``
+``[cases]``, ``[tracers]``, ``[time]``, ``[integrator]``, ``[run]``, ``[fluid]``, ``[sensor]``
+and ``[mie]``
 (checked by :func:`rimcl.scene.load.validate_scene`). Every key is optional; unknown keys
 are refused with the closest valid name. Cameras are ``[[rig.cameras]]`` tables, or a
 preset (``rig.preset``) builds them from the field's size:
@@ -37,7 +38,17 @@ PRESETS = ("lpt-challenge", "stereo")
 MODELS = ("soloff", "pinhole")
 ENGINES = ("device", "numpy")
 #: Sections of the study's scene that an LPT scene uses (checked by the study's loader).
-STUDY_SECTIONS = ("field", "cases", "tracers", "time", "integrator", "run", "fluid")
+STUDY_SECTIONS = (
+    "field",
+    "cases",
+    "tracers",
+    "time",
+    "integrator",
+    "run",
+    "fluid",
+    "sensor",
+    "mie",
+)
 #: Cases an LPT scene runs when ``cases.names`` is not given.
 DEFAULT_CASES = ("C1", "C2", "C3")
 #: The first LPT challenge's camera angles (degrees from x1, towards +x2).
@@ -100,6 +111,12 @@ class LptSettings:
     engine: str = "device"
     match_tolerances_px: tuple = (0.5, 1.0, 2.0)
     images: bool = True
+    bit_depth: int = 16
+    exposure: float = 0.5
+    threshold: float = 0.05
+    self_calibration: bool = True
+    self_calibration_cells: tuple = (3, 5, 5)
+    self_calibration_iterations: int = 3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,6 +164,12 @@ _LPT_KEYS = {
     "engine": "str",
     "match_tolerances_px": "pfloats",
     "images": "bool",
+    "bit_depth": "int",
+    "exposure": "pfloat",
+    "threshold": "pfloat",
+    "self_calibration": "bool",
+    "self_calibration_cells": "triple_int",
+    "self_calibration_iterations": "int",
 }
 _CHOICES = {"rig.preset": ("", *PRESETS), "lpt.model": MODELS, "lpt.engine": ENGINES}
 
@@ -197,6 +220,10 @@ def _value(kind, value, name):
         if not isinstance(value, list) or len(value) != 2:
             raise RimclError(f"{name} must be two whole numbers, got {value!r}")
         return tuple(_value("int", v, name) for v in value)
+    if kind == "triple_int":
+        if not isinstance(value, list) or len(value) != 3:
+            raise RimclError(f"{name} must be three whole numbers (x1, x2, x3), got {value!r}")
+        return tuple(_value("int", v, name) for v in value)
     if kind == "pair_fraction":
         if not isinstance(value, list) or len(value) != 2:
             raise RimclError(f"{name} must be two fractions in (0, 1], got {value!r}")
@@ -242,6 +269,37 @@ def _cameras(raw, where):
     return tuple(cameras)
 
 
+def _sections(raw_rig, raw_illumination, raw_lpt, where):
+    """The three LPT sections checked and filled in."""
+    rig = _table(raw_rig, _RIG_KEYS, "rig", where)
+    if rig.get("cameras"):
+        # cameras given: the preset is only what the user names
+        rig.setdefault("preset", "")
+        if rig["preset"]:
+            raise RimclError(f"{where}: give rig.preset or [[rig.cameras]], not both")
+    elif rig.get("preset", "lpt-challenge") == "":
+        raise RimclError(f'{where}: rig.preset = "" needs [[rig.cameras]] tables')
+    if not rig.get("cameras"):
+        rig.pop("cameras", None)
+    illumination = _table(raw_illumination, _ILLUMINATION_KEYS, "illumination", where)
+    settings = LptSettings(**_table(raw_lpt, _LPT_KEYS, "lpt", where))
+    if settings.calibration_planes < 3:
+        raise RimclError(f"lpt.calibration_planes in {where}: the Soloff fit needs at least 3")
+    if not 8 <= settings.bit_depth <= 16:
+        raise RimclError(f"lpt.bit_depth in {where} must be 8 to 16, got {settings.bit_depth}")
+    for name in ("exposure", "threshold"):
+        if not getattr(settings, name) < 1:
+            raise RimclError(f"lpt.{name} in {where} must be a fraction below 1")
+    if settings.self_calibration and settings.model != "soloff":
+        raise RimclError(
+            f"{where}: lpt.self_calibration corrects Soloff models; set lpt.model = "
+            '"soloff" or lpt.self_calibration = false'
+        )
+    if min(settings.calibration_grid) < 4:
+        raise RimclError(f"lpt.calibration_grid in {where}: at least 4 x 4 points per plane")
+    return RigConfig(**rig), IlluminationConfig(**illumination), settings
+
+
 def parse_lpt_scene(raw, where="the scene"):
     """Check an LPT scene mapping (as read from TOML) and fill in the defaults.
 
@@ -259,16 +317,7 @@ def parse_lpt_scene(raw, where="the scene"):
     from rimcl.scene.validate import validate_scene
 
     raw = dict(raw)
-    rig = _table(raw.pop("rig", {}), _RIG_KEYS, "rig", where)
-    if rig.get("cameras"):
-        # cameras given: the preset is only what the user names
-        rig.setdefault("preset", "")
-        if rig["preset"]:
-            raise RimclError(f"{where}: give rig.preset or [[rig.cameras]], not both")
-    elif rig.get("preset", "lpt-challenge") == "":
-        raise RimclError(f'{where}: rig.preset = "" needs [[rig.cameras]] tables')
-    illumination = _table(raw.pop("illumination", {}), _ILLUMINATION_KEYS, "illumination", where)
-    lpt = _table(raw.pop("lpt", {}), _LPT_KEYS, "lpt", where)
+    sections = _sections(raw.pop("rig", {}), raw.pop("illumination", {}), raw.pop("lpt", {}), where)
     for section in raw:
         if section not in STUDY_SECTIONS:
             known = (*STUDY_SECTIONS, "rig", "illumination", "lpt")
@@ -280,12 +329,18 @@ def parse_lpt_scene(raw, where="the scene"):
     study = validate_scene(raw, where)
     if not cases_given:
         study["cases"]["names"] = list(DEFAULT_CASES)
-    settings = LptSettings(**lpt)
-    if settings.calibration_planes < 3:
-        raise RimclError(f"lpt.calibration_planes in {where}: the Soloff fit needs at least 3")
-    if min(settings.calibration_grid) < 4:
-        raise RimclError(f"lpt.calibration_grid in {where}: at least 4 x 4 points per plane")
-    return LptScene(RigConfig(**rig), IlluminationConfig(**illumination), settings, study)
+    return LptScene(*sections, study)
+
+
+def lpt_scene_from_study(scene, where="the scene"):
+    """The LPT scene of a complete, checked study scene (``rimcl study``, ``run.mode =
+    "lpt"``): its ``[rig]``, ``[illumination]`` and ``[lpt]`` sections (keys left to the
+    pipeline omitted) and the whole scene as the study's part."""
+    raw = [
+        {name: value for name, value in scene[section].items() if value is not None}
+        for section in ("rig", "illumination", "lpt")
+    ]
+    return LptScene(*_sections(*raw, where), scene)
 
 
 def load_lpt_scene(path=None):

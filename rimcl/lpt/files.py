@@ -16,9 +16,9 @@
 
 **Dataset** (``rimcl lpt render``), in ``<out>/dataset/<case>/``:
 
-- ``images/field/cam<k>_frame<ffff>.tif`` and ``images/uniform/…``: 16-bit TIFF per camera
-  and frame through the field and through the uniform fluid; each tracer a pixel-integrated
-  Gaussian (σ of the camera's diffraction-limited image) at its image centroid;
+- ``images/field/cam<k>_frame<ffff>.tif`` and ``images/uniform/…``: TIFF per camera and
+  frame through the field and through the uniform fluid: the frames the centroids were
+  located in (:func:`frame_writer`; every tracer's digitised window added, clipped);
 - ``calibration_points.txt``: the first LPT challenge's layout, one target point a row,
   ``X Y Z x1 y1 … xC yC`` (mm, px), with ``X, Y, Z = x2, x3, x1`` from the field's origin;
 - ``cam<k>_pinhole.json``: the fitted DLT matrix (maps ``[X, Y, Z, 1]`` in mm to pixels),
@@ -28,6 +28,7 @@
 """
 
 import json
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -72,15 +73,24 @@ def write_case(path, run, result, scene, overwrite=True):
             tracks[f"x{axis + 1}_true"] = run.true[..., axis]
             tracks[f"x{axis + 1}_meas"] = result["x_meas"][..., axis]
             tracks[f"x{axis + 1}_ref"] = result["x_ref"][..., axis]
+            tracks[f"x{axis + 1}_opt_meas"] = result["x_opt_meas"][..., axis]
+            tracks[f"x{axis + 1}_opt_ref"] = result["x_opt_ref"][..., axis]
+            if "x_vsc" in result:
+                tracks[f"x{axis + 1}_vsc"] = result["x_vsc"][..., axis]
             tracks[f"u{axis + 1}_true"] = run.u_true[..., axis]
             tracks[f"a{axis + 1}_true"] = run.a_true[..., axis]
         cameras = h5.create_group("cameras")
         for c, camera in enumerate(result["cameras"]):
             group = cameras.create_group(camera.name)
-            group["centroid_meas"] = result["centroid_meas"][:, c]
-            group["centroid_ref"] = result["centroid_ref"][:, c]
-            group["disparity_meas"] = result["disparity_meas"][..., c]
-            group["disparity_ref"] = result["disparity_ref"][..., c]
+            for kind in ("meas", "ref"):
+                group[f"centroid_{kind}"] = result[f"centroid_{kind}"][:, c]
+                group[f"optics_{kind}"] = result[f"optics_{kind}"][:, c]
+                group[f"image_flags_{kind}"] = result[f"image_flags_{kind}"][:, c]
+                group[f"peak_{kind}"] = result[f"peak_{kind}"][:, c]
+                group[f"disparity_{kind}"] = result[f"disparity_{kind}"][..., c]
+                group[f"disparity_opt_{kind}"] = result[f"disparity_opt_{kind}"][..., c]
+            if "disparity_vsc" in result:
+                group["disparity_vsc"] = result["disparity_vsc"][..., c]
             group["failed_rays"] = result["failed_rays"][:, c]
             group.attrs["parameters"] = to_json(camera.describe())
             group.attrs["calibration"] = to_json(result["calibration"][c])
@@ -88,6 +98,11 @@ def write_case(path, run, result, scene, overwrite=True):
         calibration = h5.create_group("calibration")
         calibration["target"] = result["target"]
         calibration["pixels"] = result["target_pixels"]
+        h5.attrs["exposure"] = to_json(result["exposure"])
+        h5.attrs["sensor"] = to_json(result["sensor"])
+        h5.attrs["mie"] = to_json(result["mie"])
+        h5.attrs["self_calibration"] = to_json(result["self_calibration"])
+        h5.attrs["matching"] = to_json(result["matching"])
     return path
 
 
@@ -95,48 +110,29 @@ def _to_mm(points, length_m):
     return np.asarray(points)[..., XYZ_AXES] * length_m * 1e3
 
 
-def tracer_image(camera, centroids, full_scale=65535, fill=0.6):
-    """A 16-bit frame of Gaussian tracer images at ``centroids`` (N, 2) px.
-
-    Each tracer is a pixel-integrated Gaussian of the camera's ``σ``
-    (:class:`rimcl.imaging.render.Renderer`, ``exact``), scaled so that a tracer centred on
-    a pixel peaks at ``fill`` of full scale; overlapping tracers add and clip.
-    """
-    from rimcl.imaging.render import FrameImage, Renderer, quantize, scale_for
-
-    renderer = Renderer("exact", 1.0, (-0.5, -0.5), psf_sigma=camera.psf_sigma_px, bit_depth=16)
-    centred = np.zeros((1, 2))
-    reference, _ = renderer.render(
-        renderer.to_pixels(centred), np.ones(1), renderer.window_for(renderer.to_pixels(centred))
-    )
-    scale = fill * scale_for(reference, full_scale)
-    frame = FrameImage(camera.pixels[0], camera.pixels[1], full_scale)
-    for point in centroids[np.all(np.isfinite(centroids), axis=1)]:
-        local = renderer.to_pixels(point[None])
-        window = renderer.window_for(local)
-        image, _ = renderer.render(local, np.ones(1), window)
-        frame.add(window, quantize(image, scale, full_scale)[0])
-    return frame.counts
-
-
-def write_dataset(out_dir, run, result, scene, overwrite=True):
-    """Files for LPT codes (layout in the module docstring). Returns the directory."""
+def frame_writer(out_dir, scene, overwrite=True):
+    """A ``frame_sink`` for :func:`rimcl.lpt.run.run_case` that writes each camera frame as
+    a 16-bit TIFF: ``dataset/<case>/images/{field,uniform}/<cam>_frame<ffff>.tif``."""
     import tifffile
 
     from rimcl.lpt.config import describe
 
+    labels = {"meas": "field", "ref": "uniform"}
+
+    def write(case, kind, camera, frame, counts):
+        images = Path(out_dir) / "dataset" / case / "images" / labels[kind]
+        images.mkdir(parents=True, exist_ok=True)
+        config = to_json({**describe(scene), "case": case, "camera": camera.name})
+        name = images / f"{camera.name}_frame{frame:04d}.tif"
+        with atomic_path(name, overwrite) as tmp:
+            tifffile.imwrite(tmp, counts, description=config, photometric="minisblack")
+
+    return write
+
+
+def write_dataset(out_dir, run, result, scene, overwrite=True):
+    """Files for LPT codes (layout in the module docstring). Returns the directory."""
     folder = out_dir / "dataset" / result["case"]
-    config = to_json({**describe(scene), "case": result["case"]})
-    if scene.lpt.images:
-        for kind, label in (("meas", "field"), ("ref", "uniform")):
-            images = folder / "images" / label
-            images.mkdir(parents=True, exist_ok=True)
-            for c, camera in enumerate(result["cameras"]):
-                for k in range(run.times.size):
-                    counts = tracer_image(camera, result[f"centroid_{kind}"][k, c])
-                    name = images / f"{camera.name}_frame{k:04d}.tif"
-                    with atomic_path(name, overwrite) as tmp:
-                        tifffile.imwrite(tmp, counts, description=config, photometric="minisblack")
     folder.mkdir(parents=True, exist_ok=True)
     target_mm = _to_mm(result["target"], run.length_m)
     pixels = result["target_pixels"]

@@ -1,14 +1,23 @@
-"""The LPT chain: tracks, views through the field, calibration, triangulation, statistics.
+"""The LPT chain: tracks, views through the field, images, calibration, triangulation,
+self-calibration, matching, statistics.
 
 For each case of the scene (same tracers, same tracks, common random numbers):
 
 1. the rig is built for the case's fluid (its reference index is the calibration fluid);
 2. each camera is calibrated on a target through the uniform fluid (:mod:`.calibration`);
-3. the rays per tracer are chosen by convergence of the image centroid (:mod:`.views`);
+3. the rig's exposure is set from the chief rays through the uniform fluid, and the rays
+   per tracer are chosen by convergence of the located image centroid (:mod:`.images`,
+   :mod:`.views`);
 4. at every frame each tracer is seen by each camera through the field (``meas``) and
-   through the uniform fluid (``ref``), and triangulated on the calibrated models;
-5. tracks are fitted (sliding polynomial, :func:`rimcl.ptv.track.sliding_fit`) and compared:
-   refraction ``meas - ref`` and baseline ``ref - true``, per component.
+   through the uniform fluid (``ref``), its image rendered, digitised and located, and
+   triangulated on the calibrated models, from the located centroids and from the optics
+   centroids (the optics part of the error);
+5. the volume self-calibration corrects the models on the measured images of every frame
+   (:mod:`.selfcal`), and the first frame is matched from the images alone
+   (:mod:`.matching`);
+6. tracks are fitted (sliding polynomial, :func:`rimcl.ptv.track.sliding_fit`) and compared:
+   refraction ``meas - ref`` (with and without the self-calibration) and baseline
+   ``ref - true``, per component.
 
 Units: positions in field length units (``length_m`` metres each), image points in pixels,
 velocities in length/time units, accelerations in length/time² units.
@@ -25,7 +34,19 @@ from rimcl.lpt.calibration import PinholeModel, SoloffModel, target_points, tria
 from rimcl.lpt.config import CameraSpec, preset_cameras
 from rimcl.lpt.config import describe as describe_scene
 from rimcl.lpt.flow import BUILTIN_DT, Volume, builtin_flow, volume_velocity
+from rimcl.lpt.images import (
+    PASSES,
+    camera_imaging,
+    locate_view,
+    new_canvas,
+    noiseless,
+    ray_light,
+    rig_exposure,
+    unusable,
+)
+from rimcl.lpt.matching import match_frame
 from rimcl.lpt.rig import RigCamera
+from rimcl.lpt.selfcal import self_calibrate
 from rimcl.lpt.views import Tracer, choose_ray_count, uniform_field, view
 from rimcl.optics.camera import FlatWindow
 from rimcl.stats.bootstrap import TracerBootstrap
@@ -37,6 +58,8 @@ RAY_SAMPLE = 32
 #: Flag bits of a tracer: a ray that did not reach the exit face, an image off a sensor.
 FLAG_RAY_FAILED = 1
 FLAG_OFF_SENSOR = 2
+#: An image not located in some camera and frame (below threshold, cut by its window, ...).
+FLAG_IMAGE_LOST = 4
 
 
 @dataclasses.dataclass
@@ -189,15 +212,61 @@ def _off_sensor(camera, pixels):
     return ~inside
 
 
-def run_case(run, scene, case, device=None, progress=None):
-    """Measure one case: views, triangulation, tracks (see the module's steps).
+def _sensor_and_mie(scene, n_ref):
+    """The sensor (``[sensor]``, ``lpt.bit_depth`` bits) and the Mie weights (``[mie]``; the
+    particle's surroundings default to the case's reference fluid), or None with Mie off."""
+    from rimcl.scene.config import MieConfig, SensorConfig
+
+    study = scene.study
+    sensor = SensorConfig(**study["sensor"]).build(scene.lpt.bit_depth, study["tracers"]["seed"])
+    mie = MieConfig(**study["mie"])
+    if mie.fluid_index is None:
+        mie = dataclasses.replace(mie, fluid_index=float(n_ref))
+    return sensor, mie.build()
+
+
+def _choose_rays(field, cameras, imagings, exposure, sensor, mie, points, tracer, settings):
+    """Per camera, the ray count whose located centroid (noiseless sensor) has converged."""
+    choices = []
+    for c, camera in enumerate(cameras):
+        quiet = dataclasses.replace(imagings[c], sensor=noiseless(sensor))
+
+        def located(seen, quiet=quiet, c=c):
+            light = ray_light(seen, mie)
+            key = (PASSES["meas"], 0, c)
+            return locate_view(quiet, seen, light, exposure.counts_per_light, key).centroid
+
+        choices.append(
+            choose_ray_count(
+                field,
+                camera,
+                points,
+                tracer,
+                settings.ray_tolerance_px,
+                settings.max_rays,
+                centroid=located,
+            )
+        )
+    return choices
+
+
+def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
+    """Measure one case: views, images, triangulation, tracks (see the module's steps).
+
+    Parameters
+    ----------
+    frame_sink : callable, optional
+        ``frame_sink(case, kind, camera, frame, counts)`` receives every camera frame
+        (``kind`` ``"meas"`` or ``"ref"``, counts uint16 (rows, columns)).
 
     Returns
     -------
     dict
-        Arrays (``centroid_meas``/``ref`` (F, C, N, 2), ``x_meas``/``x_ref`` (F, N, 3),
-        ``disparity_meas``/``ref`` (F, N, C), ``failed_rays`` (F, C, N), ``flags`` (N,)),
-        the cameras, calibration, ray choices and stage ``timings`` (s).
+        Arrays (``centroid_meas``/``ref`` (F, C, N, 2) located, ``optics_meas``/``ref``
+        (F, C, N, 2) the rays' mean image points, ``x_meas``/``x_ref`` and
+        ``x_opt_meas``/``x_opt_ref`` (F, N, 3), ``disparity_*`` (F, N, C), ``image_flags_*``
+        (F, C, N), ``failed_rays`` (F, C, N), ``flags`` (N,)), the cameras, calibration,
+        exposure, ray choices and stage ``timings`` (s).
     """
     from rimcl.ptv.field_source import case_of
     from rimcl.scene.config import FluidConfig
@@ -216,50 +285,101 @@ def run_case(run, scene, case, device=None, progress=None):
     timings["calibration"] = time.perf_counter() - started
     tracer = _tracer(scene, device)
     uniform = uniform_field(field0)
+    sensor, mie = _sensor_and_mie(scene, field0.n_ref)
     started = time.perf_counter()
+    chief = [view(uniform, camera, run.true[0], 1, tracer) for camera in cameras]
+    exposure = rig_exposure(cameras, chief, mie, sensor, settings.exposure, settings.threshold)
+    imagings = [camera_imaging(camera, c, exposure, sensor) for c, camera in enumerate(cameras)]
     sample = run.true[0][:RAY_SAMPLE]
-    choices = [
-        choose_ray_count(
-            field0, camera, sample, tracer, settings.ray_tolerance_px, settings.max_rays
-        )
-        for camera in cameras
-    ]
+    choices = _choose_rays(
+        field0, cameras, imagings, exposure, sensor, mie, sample, tracer, settings
+    )
     timings["ray_choice"] = time.perf_counter() - started
     frames, count, ncam = run.true.shape[0], run.true.shape[1], len(cameras)
-    centroid = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in ("meas", "ref")}
+    kinds = ("meas", "ref")
+    centroid = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
+    optics = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
+    image_flags = {kind: np.zeros((frames, ncam, count), dtype=np.int64) for kind in kinds}
+    peaks = {kind: np.full((frames, ncam, count), np.nan) for kind in kinds}
     failed = np.zeros((frames, ncam, count), dtype=np.int32)
-    timings["views"] = 0.0
+    timings["views"] = timings["images"] = 0.0
     for k, moment in enumerate(run.times):
         started = time.perf_counter()
         field = field0 if k == 0 else index.field(run.source, None, moment)
         timings["field"] += time.perf_counter() - started
-        started = time.perf_counter()
         for c, camera in enumerate(cameras):
-            rays = choices[c]["rays"]
-            seen = view(field, camera, run.true[k], rays, tracer)
-            centroid["meas"][k, c] = seen.centroid
-            failed[k, c] = seen.failed
-            centroid["ref"][k, c] = view(uniform, camera, run.true[k], rays, tracer).centroid
-        timings["views"] += time.perf_counter() - started
+            for kind, medium in (("meas", field), ("ref", uniform)):
+                started = time.perf_counter()
+                seen = view(medium, camera, run.true[k], choices[c]["rays"], tracer)
+                middle = time.perf_counter()
+                canvas = new_canvas(camera, sensor) if frame_sink else None
+                found = locate_view(
+                    imagings[c],
+                    seen,
+                    ray_light(seen, mie),
+                    exposure.scale,
+                    (PASSES[kind], k, c),
+                    canvas,
+                )
+                timings["views"] += middle - started
+                timings["images"] += time.perf_counter() - middle
+                if kind == "meas":
+                    failed[k, c] = seen.failed
+                centroid[kind][k, c] = found.centroid
+                optics[kind][k, c] = found.optics
+                image_flags[kind][k, c] = found.flags
+                peaks[kind][k, c] = found.peak
+                if frame_sink:
+                    frame_sink(str(index.name), kind, camera, k, canvas.counts)
         if progress:
             progress(case, k + 1, frames)
     started = time.perf_counter()
     positions, disparity = {}, {}
-    for kind in ("meas", "ref"):
-        solved = [triangulate(models, centroid[kind][k]) for k in range(frames)]
-        positions[kind] = np.stack([s[0] for s in solved])
-        disparity[kind] = np.stack([s[1] for s in solved])
+    for kind in kinds:
+        for label, points in ((kind, centroid[kind]), (f"opt_{kind}", optics[kind])):
+            positions[label], disparity[label] = triangulate_frames(models, points)
     pinhole = [f["pinhole"] for f in fitted]
-    pinhole_ref = np.stack([triangulate(pinhole, centroid["ref"][k])[0] for k in range(frames)])
+    pinhole_ref = triangulate_frames(pinhole, centroid["ref"])[0]
     timings["triangulation"] = time.perf_counter() - started
+    calibrated = None
+    if settings.self_calibration:
+        started = time.perf_counter()
+        every = np.moveaxis(centroid["meas"], 1, 0).reshape(ncam, frames * count, 2)
+        calibrated = self_calibrate(
+            models,
+            every,
+            settings.self_calibration_cells,
+            settings.self_calibration_iterations,
+        )
+        positions["vsc"], disparity["vsc"] = triangulate_frames(calibrated.models, centroid["meas"])
+        timings["self_calibration"] = time.perf_counter() - started
+    matching = None
+    if settings.model == "soloff":
+        started = time.perf_counter()
+        chosen = {"meas": models, "ref": models}
+        if calibrated is not None:
+            chosen["vsc"] = calibrated.models
+        matching = {
+            kind: [
+                match_frame(chosen[kind], centroid["ref" if kind == "ref" else "meas"][0], tol)
+                for tol in settings.match_tolerances_px
+            ]
+            for kind in chosen
+        }
+        timings["matching"] = time.perf_counter() - started
     flags = np.zeros(count, dtype=np.int32)
     flags[np.any(failed > 0, axis=(0, 1))] |= FLAG_RAY_FAILED
     off = np.zeros(count, dtype=bool)
     for c, camera in enumerate(cameras):
-        off |= np.any(_off_sensor(camera, centroid["ref"][:, c]), axis=0)
+        off |= np.any(_off_sensor(camera, optics["ref"][:, c]), axis=0)
     flags[off] |= FLAG_OFF_SENSOR
-    return {
+    lost = np.zeros(count, dtype=bool)
+    for kind in kinds:
+        lost |= np.any(unusable(image_flags[kind]), axis=(0, 1))
+    flags[lost] |= FLAG_IMAGE_LOST
+    result = {
         "case": str(index.name),
+        "abscissa": _abscissa(index),
         "n_ref": float(field0.n_ref),
         "cameras": cameras,
         "calibration": [
@@ -273,17 +393,55 @@ def run_case(run, scene, case, device=None, progress=None):
         "target": target,
         "target_pixels": np.stack([f["pixels"] for f in fitted]),
         "rays": choices,
-        "centroid_meas": centroid["meas"],
-        "centroid_ref": centroid["ref"],
-        "x_meas": positions["meas"],
-        "x_ref": positions["ref"],
+        "exposure": exposure.describe(),
+        "sensor": sensor.describe(),
+        "mie": None if mie is None else mie.describe(),
+        "self_calibration": None if calibrated is None else calibrated.describe(),
+        "matching": matching,
         "x_ref_pinhole": pinhole_ref,
-        "disparity_meas": disparity["meas"],
-        "disparity_ref": disparity["ref"],
         "failed_rays": failed,
         "flags": flags,
         "timings": timings,
     }
+    for kind in kinds:
+        result[f"centroid_{kind}"] = centroid[kind]
+        result[f"optics_{kind}"] = optics[kind]
+        result[f"image_flags_{kind}"] = image_flags[kind]
+        result[f"peak_{kind}"] = peaks[kind]
+        for label in (kind, f"opt_{kind}"):
+            result[f"x_{label}"] = positions[label]
+            result[f"disparity_{label}"] = disparity[label]
+    if calibrated is not None:
+        result["x_vsc"], result["disparity_vsc"] = positions["vsc"], disparity["vsc"]
+    return result
+
+
+def _abscissa(index):
+    """What a case is plotted against: ``G``, or a fluid case's ``ΔT``/``ΔS``."""
+    if index.fluid is not None:
+        symbol = "ΔS" if index.fluid.kind == "saltwater" else "ΔT"
+        return {"name": symbol, "value": float(index.difference), "unit": index.fluid.unit}
+    if np.isfinite(index.g):
+        return {"name": "G", "value": float(index.g), "unit": ""}
+    return {"name": "delta_n", "value": None, "unit": ""}
+
+
+#: Bin edges of the disparity histograms (px): log-spaced, 1e-3 to 1e2 px.
+DISPARITY_EDGES = np.logspace(-3, 2, 41)
+
+
+def triangulate_frames(models, pixels):
+    """:func:`~rimcl.lpt.calibration.triangulate` of every frame of ``pixels`` (F, C, N, 2).
+
+    Returns
+    -------
+    positions : ndarray, shape (F, N, 3)
+    disparity : ndarray, shape (F, N, C)
+    """
+    frames, cameras, count = pixels.shape[:3]
+    flat = np.moveaxis(pixels, 1, 0).reshape(cameras, frames * count, 2)
+    positions, disparity = triangulate(models, flat)  # every frame at once: one Newton loop
+    return positions.reshape(frames, count, 3), disparity.reshape(frames, count, cameras)
 
 
 def rms_interval(values, ids, bootstrap):
@@ -329,8 +487,11 @@ def case_statistics(run, result, scene):
     stats["excluded"] = {
         "ray_failed": int(np.sum(result["flags"] & FLAG_RAY_FAILED > 0)),
         "off_sensor": int(np.sum(result["flags"] & FLAG_OFF_SENSOR > 0)),
+        "image_lost": int(np.sum(result["flags"] & FLAG_IMAGE_LOST > 0)),
     }
     x_meas, x_ref = result["x_meas"][:, keep], result["x_ref"][:, keep]
+    optics = result["x_opt_meas"][:, keep] - result["x_opt_ref"][:, keep]
+    x_vsc = result["x_vsc"][:, keep] if "x_vsc" in result else None
     truth = run.true[:, keep]
     position = {}
     for axis, name in enumerate(COMPONENTS):
@@ -338,7 +499,12 @@ def case_statistics(run, result, scene):
         baseline = rms_interval((x_ref - truth)[..., axis].ravel(), ids, bootstrap)
         position[name] = {
             "refraction": refraction,
+            "optics": rms_interval(optics[..., axis].ravel(), ids, bootstrap),
+            "imaging": rms_interval((x_meas - x_ref - optics)[..., axis].ravel(), ids, bootstrap),
             "baseline": baseline,
+            "refraction_self_calibrated": None
+            if x_vsc is None
+            else rms_interval((x_vsc - x_ref)[..., axis].ravel(), ids, bootstrap),
             "refraction_rms_px": None if refraction["rms"] is None else refraction["rms"] / pixel,
             "refraction_rms_um": None
             if refraction["rms"] is None
@@ -347,10 +513,19 @@ def case_statistics(run, result, scene):
     stats["position"] = position
     stats["pixel_size"] = pixel
     disparity = {}
-    for kind in ("meas", "ref"):
+    for kind in ("meas", "ref", "opt_meas", "opt_ref", "vsc"):
+        if f"disparity_{kind}" not in result:
+            continue
         worst = np.max(result[f"disparity_{kind}"][:, keep], axis=-1).ravel()
         finite = worst[np.isfinite(worst)]
+        counts, _ = np.histogram(finite, bins=DISPARITY_EDGES)
         disparity[kind] = {
+            "histogram": {
+                "edges_px": DISPARITY_EDGES.tolist(),
+                "pdf_per_px": (counts / max(finite.size, 1) / np.diff(DISPARITY_EDGES)).tolist(),
+                "below_first_edge": int(np.sum(finite < DISPARITY_EDGES[0])),
+                "above_last_edge": int(np.sum(finite > DISPARITY_EDGES[-1])),
+            },
             "median_px": float(np.median(finite)) if finite.size else None,
             "p95_px": float(np.percentile(finite, 95)) if finite.size else None,
             "max_px": float(np.max(finite)) if finite.size else None,
@@ -364,7 +539,8 @@ def case_statistics(run, result, scene):
     dt = float(run.times[1] - run.times[0]) if run.times.size > 1 else None
     fits = {
         kind: sliding_fit(result[f"x_{kind}"][:, keep], dt, window, order)
-        for kind in ("meas", "ref")
+        for kind in ("meas", "ref", "vsc")
+        if f"x_{kind}" in result
     }
     centres = fits["meas"].centres
     fit_ids = np.broadcast_to(np.arange(keep.size), (centres.size, keep.size))[:, keep].ravel()
@@ -387,6 +563,15 @@ def case_statistics(run, result, scene):
                 ),
                 "baseline": error_summary(
                     (reference - truth)[..., axis].ravel(),
+                    truth[..., axis].ravel(),
+                    fit_ids,
+                    bootstrap,
+                    condition=False,
+                ),
+                "refraction_self_calibrated": None
+                if "vsc" not in fits
+                else error_summary(
+                    (getattr(fits["vsc"], attribute) - reference)[..., axis].ravel(),
                     truth[..., axis].ravel(),
                     fit_ids,
                     bootstrap,
@@ -421,7 +606,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
         The statistics document written to ``lpt_stats.json``.
     """
     from rimcl.core.provenance import versions
-    from rimcl.lpt.files import write_case, write_dataset, write_json
+    from rimcl.lpt.files import frame_writer, write_case, write_dataset, write_json
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -443,9 +628,12 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
     }
     try:
         for case in scene.study["cases"]["names"]:
-            result = run_case(run, scene, case, device, progress)
+            sink = frame_writer(out_dir, scene, overwrite) if dataset and scene.lpt.images else None
+            result = run_case(run, scene, case, device, progress, sink)
             stats = case_statistics(run, result, scene)
             stats["rays"] = result["rays"]
+            for name in ("exposure", "sensor", "mie", "self_calibration", "matching"):
+                stats[name] = result[name]
             stats["calibration_residual_px"] = {
                 cam.name: {
                     "pinhole": cal["pinhole"]["residual_px"],
@@ -461,6 +649,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
                 for a, name in enumerate(COMPONENTS)
             }
             stats["n_ref"] = result["n_ref"]
+            stats["abscissa"] = result["abscissa"]
             stats["timings_s"] = result["timings"]
             started = time.perf_counter()
             write_case(out_dir / f"lpt_case_{result['case']}.h5", run, result, scene, overwrite)
@@ -476,6 +665,12 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
 
 def _cell(value, scale=1.0, digits=3):
     return "n/a" if value is None else f"{value * scale:.{digits}g}"
+
+
+def _px(summary, case):
+    return (
+        None if summary is None or summary["rms"] is None else summary["rms"] / case["pixel_size"]
+    )
 
 
 def summary_lines(document):
@@ -506,7 +701,33 @@ def summary_lines(document):
                     for k in COMPONENTS
                 )
             )
-        meas = case["disparity"]["meas"]
-        lost = ", ".join(f">{k} {_cell(v, 100, 3)} %" for k, v in meas["lost_fraction"].items())
-        lines.append(f"  disparity median {_cell(meas['median_px'])} px; matches lost {lost}")
+        for kind, label in (("meas", ""), ("vsc", " (self-calibrated)")):
+            if kind not in case["disparity"]:
+                continue
+            block = case["disparity"][kind]
+            lost = ", ".join(
+                f">{k} {_cell(v, 100, 3)} %" for k, v in block["lost_fraction"].items()
+            )
+            lines.append(
+                f"  disparity{label} median {_cell(block['median_px'])} px; matches lost {lost}"
+            )
+        for kind, label in (("meas", "field"), ("vsc", "self-calibrated")):
+            rows = (case.get("matching") or {}).get(kind)
+            if rows:
+                lines.append(
+                    f"  matching from the images ({label}, first frame): "
+                    + "; ".join(
+                        f"{r['tolerance_px']:g} px: {r['ghosts']} ghosts, "
+                        f"{r['missed']} missed of {case['tracers']}"
+                        for r in rows
+                    )
+                )
+        if case.get("self_calibration"):
+            lines.append(
+                "  self-calibrated position refraction rms (px): "
+                + ", ".join(
+                    f"{k} {_cell(_px(pos[k]['refraction_self_calibrated'], case))}"
+                    for k in COMPONENTS
+                )
+            )
     return lines

@@ -11,7 +11,7 @@ exit face ``x1 = x_end``, carried through the window (with the fluid's index at 
 point), and imaged by the lens (:meth:`RigCamera.image_of_rays`). The
 tracer's image centroid is the mean of its rays' image points (the optics part of the
 error budget: no pixels, equal weights). Through a uniform field the rays are straight
-lines (:func:`rimcl.optics.trace.straight_rays`), exactly.
+lines (:func:`rimcl.optics.straight.straight_rays`), exactly.
 
 The number of rays is chosen by convergence (:func:`choose_ray_count`): the smallest count
 in ``1, 4, 8, 16, …`` whose centroids agree with the next count's within a tolerance (px)
@@ -20,13 +20,14 @@ on every sampled tracer.
 
 import dataclasses
 import itertools
+import operator
 
 import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.fields.field import Field
 from rimcl.optics.reference import sample_field, trace_rays_reference
-from rimcl.optics.trace import straight_rays
+from rimcl.optics.straight import straight_rays
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,12 +106,15 @@ class View:
         Rays of each tracer that did not leave through the exit face.
     trace : TraceResult
         The traced rays (N·K rows, tracer-major).
+    directions : ndarray, shape (N, K, 3)
+        Each ray's unit direction as it leaves the tracer (for Mie weights).
     """
 
     images: np.ndarray
     centroid: np.ndarray
     failed: np.ndarray
     trace: object
+    directions: np.ndarray
 
 
 #: Re-aims of the chief ray at most, and the miss (field length units) that ends them.
@@ -155,7 +159,7 @@ def chief_targets(field, camera, points, tracer):
     return targets, miss
 
 
-def view(field, camera, points, rays, tracer):
+def view(field, camera, points, rays, tracer, chief=None):
     """Trace ``rays`` rays from every point to ``camera`` and image them.
 
     Parameters
@@ -167,13 +171,16 @@ def view(field, camera, points, rays, tracer):
     rays : int
         Rays per tracer (1: the chief ray only).
     tracer : Tracer
+    chief : ndarray, shape (N, 3), optional
+        The chief rays' aim points (:func:`chief_targets`), when already known.
 
     Returns
     -------
     View
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    chief, _ = chief_targets(field, camera, points, tracer)
+    if chief is None:
+        chief, _ = chief_targets(field, camera, points, tracer)
     pupil = camera.pupil_points(rays) - camera.position
     directions = camera.aim(points, chief[:, None] + pupil[None]).reshape(-1, 3)
     origins = np.repeat(points, len(pupil), axis=0)
@@ -184,7 +191,13 @@ def view(field, camera, points, rays, tracer):
     images[~ok] = np.nan
     images = images.reshape(len(points), len(pupil), 2)
     failed = np.sum(~ok.reshape(len(points), len(pupil)), axis=1)
-    return View(images, images.mean(axis=1), failed, result)
+    return View(
+        images,
+        images.mean(axis=1),
+        failed,
+        result,
+        directions.reshape(len(points), len(pupil), 3),
+    )
 
 
 def ray_counts(max_rays):
@@ -196,7 +209,7 @@ def ray_counts(max_rays):
     return counts
 
 
-def choose_ray_count(field, camera, points, tracer, tolerance_px, max_rays):
+def choose_ray_count(field, camera, points, tracer, tolerance_px, max_rays, centroid=None):
     """The fewest rays per tracer whose image centroid has converged.
 
     Parameters
@@ -208,24 +221,36 @@ def choose_ray_count(field, camera, points, tracer, tolerance_px, max_rays):
     tolerance_px : float
         Largest allowed change of a centroid (px) to the next count.
     max_rays : int
+    centroid : callable, optional
+        ``centroid(view) -> (N, 2)`` px: the centroid tested (the rendered and located
+        image, :mod:`rimcl.lpt.images`); default the mean of the rays' image points.
 
     Returns
     -------
     dict
-        ``rays`` (the choice), ``converged`` (bool), ``tolerance_px``, and ``changes_px``:
-        per candidate count, the largest centroid change to the next count.
+        ``rays`` (the choice), ``converged`` (bool), ``tolerance_px``, ``counts`` (the
+        candidates) and ``changes_px``: per count tried, the largest centroid change to the
+        next count (the search stops at the first change within the tolerance).
     """
     counts = ray_counts(max_rays)
-    centroids = [view(field, camera, points, count, tracer).centroid for count in counts]
-    changes = []
-    for first, second in itertools.pairwise(centroids):
-        change = np.linalg.norm(second - first, axis=-1)
+    if centroid is None:
+        centroid = operator.attrgetter("centroid")
+    chief, _ = chief_targets(field, camera, points, tracer)  # the same for every count
+
+    def located(count):
+        return centroid(view(field, camera, points, count, tracer, chief))
+
+    # counts are tried in turn and the search stops at the first converged one
+    changes, chosen, converged = [], counts[-1], False
+    previous = located(counts[0])
+    for count, following in itertools.pairwise(counts):
+        current = located(following)
+        change = np.linalg.norm(current - previous, axis=-1)
         changes.append(float(np.nanmax(change)) if np.any(np.isfinite(change)) else None)
-    chosen, converged = counts[-1], False
-    for count, change in zip(counts, changes, strict=False):
-        if change is not None and change <= tolerance_px:
+        if changes[-1] is not None and changes[-1] <= tolerance_px:
             chosen, converged = count, True
             break
+        previous = current
     return {
         "rays": int(chosen),
         "converged": converged,

@@ -131,7 +131,7 @@ def calibrate(
     tolerance : float, optional
         Allowed r' error (length units); default
         :func:`rimcl.optics.trace.default_tolerance` (0.01 pixel of the paper's camera).
-    kernel_shape : rimcl.optics.trace.KernelShape, optional
+    kernel_shape : rimcl.optics.shapes.KernelShape, optional
 
     Returns
     -------

@@ -40,7 +40,7 @@ def _jit(cache=True, **options):
     """numba.njit with an on-disk cache (the first compile takes ~20 s), or nothing."""
     if numba is None:
         return lambda function: function
-    return numba.njit(cache=cache, **options)
+    return numba.njit(cache=cache, error_model="numpy", **options)
 
 
 @_jit(inline="always")
@@ -56,48 +56,65 @@ def _cell(u, count, periodic):
 
 
 @_jit(inline="always")
-def _sample(nodes, origin, inv_h, n_ref, periodic, x1, x2, x3, out):
+def _blend(nodes, c, i1, j1, w1, i2, j2, w2, i3, j3, w3):
+    """Component ``c`` of the nodes, trilinear in float64: along x1, then x2, then x3."""
+    # each float32 node to float64 first: their differences are not rounded to float32
+    v000, v001 = np.float64(nodes[i3, i2, i1, c]), np.float64(nodes[i3, i2, j1, c])
+    v010, v011 = np.float64(nodes[i3, j2, i1, c]), np.float64(nodes[i3, j2, j1, c])
+    v100, v101 = np.float64(nodes[j3, i2, i1, c]), np.float64(nodes[j3, i2, j1, c])
+    v110, v111 = np.float64(nodes[j3, j2, i1, c]), np.float64(nodes[j3, j2, j1, c])
+    a00 = v000 + w1 * (v001 - v000)
+    a01 = v010 + w1 * (v011 - v010)
+    a10 = v100 + w1 * (v101 - v100)
+    a11 = v110 + w1 * (v111 - v110)
+    a0 = a00 + w2 * (a01 - a00)
+    a1 = a10 + w2 * (a11 - a10)
+    return a0 + w3 * (a1 - a0)
+
+
+@_jit(inline="always")
+def _sample(nodes, origin, inv_h, n_ref, periodic, x1, x2, x3):
+    """``(n, ∂n/∂x1, ∂n/∂x2, ∂n/∂x3)`` at a point, trilinear, as four scalars: the loop
+    over rays keeps its state in registers and allocates nothing."""
     n3, n2, n1, _ = nodes.shape
     i1, j1, w1 = _cell((x1 - origin[0]) * inv_h[0], n1, periodic)
     i2, j2, w2 = _cell((x2 - origin[1]) * inv_h[1], n2, periodic)
     i3, j3, w3 = _cell((x3 - origin[2]) * inv_h[2], n3, periodic)
-    for c in range(4):
-        a00 = nodes[i3, i2, i1, c] + w1 * (nodes[i3, i2, j1, c] - nodes[i3, i2, i1, c])
-        a01 = nodes[i3, j2, i1, c] + w1 * (nodes[i3, j2, j1, c] - nodes[i3, j2, i1, c])
-        a10 = nodes[j3, i2, i1, c] + w1 * (nodes[j3, i2, j1, c] - nodes[j3, i2, i1, c])
-        a11 = nodes[j3, j2, i1, c] + w1 * (nodes[j3, j2, j1, c] - nodes[j3, j2, i1, c])
-        a0 = a00 + w2 * (a01 - a00)
-        a1 = a10 + w2 * (a11 - a10)
-        out[c] = a0 + w3 * (a1 - a0)
-    out[0] += n_ref
+    return (
+        _blend(nodes, 0, i1, j1, w1, i2, j2, w2, i3, j3, w3) + n_ref,
+        _blend(nodes, 1, i1, j1, w1, i2, j2, w2, i3, j3, w3),
+        _blend(nodes, 2, i1, j1, w1, i2, j2, w2, i3, j3, w3),
+        _blend(nodes, 3, i1, j1, w1, i2, j2, w2, i3, j3, w3),
+    )
 
 
 @_jit(inline="always")
-def _step(nodes, origin, inv_h, n_ref, periodic, r, t, d_a, h, r_out, t_out, s):
-    a = np.empty(3)
-    b = np.empty(3)
-    for k in range(3):
-        a[k] = h * d_a[k]
-    _sample(
+def _step(nodes, origin, inv_h, n_ref, periodic, r1, r2, r3, t1, t2, t3, n, g1, g2, g3, h):
+    """One RKN step of length ``h`` from ``(r, t)``, with ``(n, ∇n)`` sampled at ``r``:
+    the new ``(r, t)`` and ``(n, ∇n)`` at the step's last sample point."""
+    a1, a2, a3 = h * (n * g1), h * (n * g2), h * (n * g3)
+    n, g1, g2, g3 = _sample(
         nodes, origin, inv_h, n_ref, periodic,
-        r[0] + 0.5 * h * t[0] + 0.125 * h * a[0],
-        r[1] + 0.5 * h * t[1] + 0.125 * h * a[1],
-        r[2] + 0.5 * h * t[2] + 0.125 * h * a[2],
-        s,
+        r1 + 0.5 * h * t1 + 0.125 * h * a1,
+        r2 + 0.5 * h * t2 + 0.125 * h * a2,
+        r3 + 0.5 * h * t3 + 0.125 * h * a3,
     )  # fmt: skip
-    for k in range(3):
-        b[k] = h * s[0] * s[k + 1]
-    _sample(
+    b1, b2, b3 = h * n * g1, h * n * g2, h * n * g3
+    n, g1, g2, g3 = _sample(
         nodes, origin, inv_h, n_ref, periodic,
-        r[0] + h * t[0] + 0.5 * h * b[0],
-        r[1] + h * t[1] + 0.5 * h * b[1],
-        r[2] + h * t[2] + 0.5 * h * b[2],
-        s,
+        r1 + h * t1 + 0.5 * h * b1,
+        r2 + h * t2 + 0.5 * h * b2,
+        r3 + h * t3 + 0.5 * h * b3,
     )  # fmt: skip
-    for k in range(3):
-        c = h * s[0] * s[k + 1]
-        r_out[k] = r[k] + h * (t[k] + (a[k] + 2.0 * b[k]) / 6.0)
-        t_out[k] = t[k] + (a[k] + 4.0 * b[k] + c) / 6.0
+    c1, c2, c3 = h * n * g1, h * n * g2, h * n * g3
+    return (
+        r1 + h * (t1 + (a1 + 2.0 * b1) / 6.0),
+        r2 + h * (t2 + (a2 + 2.0 * b2) / 6.0),
+        r3 + h * (t3 + (a3 + 2.0 * b3) / 6.0),
+        t1 + (a1 + 4.0 * b1 + c1) / 6.0,
+        t2 + (a2 + 4.0 * b2 + c2) / 6.0,
+        t3 + (a3 + 4.0 * b3 + c3) / 6.0,
+    )
 
 
 def _trace(nodes, origin, inv_h, n_ref, periodic, box_lo, box_hi, r0, d0, x_end, h, limit):
@@ -106,19 +123,13 @@ def _trace(nodes, origin, inv_h, n_ref, periodic, box_lo, box_hi, r0, d0, x_end,
     info = np.zeros((count, 2), dtype=np.int32)
     eps = np.finfo(np.float64).eps
     for ray in prange(count):
-        s = np.empty(4)
-        r = r0[ray].copy()
-        t = np.empty(3)
-        d_a = np.empty(3)
-        r_new = np.empty(3)
-        t_new = np.empty(3)
-        _sample(nodes, origin, inv_h, n_ref, periodic, r[0], r[1], r[2], s)
-        for k in range(3):
-            t[k] = s[0] * d0[ray, k]
-        offset = r[0] - x_end
+        r1, r2, r3 = r0[ray, 0], r0[ray, 1], r0[ray, 2]
+        n, g1, g2, g3 = _sample(nodes, origin, inv_h, n_ref, periodic, r1, r2, r3)
+        t1, t2, t3 = n * d0[ray, 0], n * d0[ray, 1], n * d0[ray, 2]
+        offset = r1 - x_end
         on_plane = offset == 0.0
         if on_plane:
-            side = 1.0 if t[0] >= 0.0 else -1.0
+            side = 1.0 if t1 >= 0.0 else -1.0
         else:
             side = 1.0 if offset > 0.0 else -1.0
         status = -1
@@ -127,36 +138,45 @@ def _trace(nodes, origin, inv_h, n_ref, periodic, box_lo, box_hi, r0, d0, x_end,
             if steps >= limit:
                 status = 3
                 break
-            for k in range(3):
-                d_a[k] = s[0] * s[k + 1]
-            _step(nodes, origin, inv_h, n_ref, periodic, r, t, d_a, h, r_new, t_new, s)
+            q1, q2, q3, u1, u2, u3 = _step(
+                nodes, origin, inv_h, n_ref, periodic, r1, r2, r3, t1, t2, t3, n, g1, g2, g3, h
+            )
             steps += 1
-            new_offset = r_new[0] - x_end
-            if not (np.all(np.isfinite(r_new)) and np.all(np.isfinite(t_new))):
+            new_offset = q1 - x_end
+            finite = (
+                math.isfinite(q1) and math.isfinite(q2) and math.isfinite(q3)
+                and math.isfinite(u1) and math.isfinite(u2) and math.isfinite(u3)
+            )  # fmt: skip
+            if not finite:
                 status = 4
             elif side * new_offset <= 0.0:
                 hk = h * offset / (offset - new_offset)
                 for _ in range(_NEWTON_ITERATIONS):
-                    _step(nodes, origin, inv_h, n_ref, periodic, r, t, d_a, hk, r_new, t_new, s)
-                    dh = (r_new[0] - x_end) / t_new[0]
+                    q1, q2, q3, u1, u2, u3 = _step(
+                        nodes, origin, inv_h, n_ref, periodic,
+                        r1, r2, r3, t1, t2, t3, n, g1, g2, g3, hk,
+                    )  # fmt: skip
+                    dh = (q1 - x_end) / u1
                     if not abs(dh) > 4.0 * eps * hk:
                         break
                     hk = min(max(hk - dh, 0.0), h)
                 status = 0
-            r[:] = r_new
-            t[:] = t_new
+            r1, r2, r3, t1, t2, t3 = q1, q2, q3, u1, u2, u3
             offset = new_offset
             if status >= 0:
                 break
-            for k in range(3):
-                if r[k] < box_lo[k] or r[k] > box_hi[k]:
-                    status = 1
-            if status < 0 and not on_plane and -side * t[0] <= 0.0:
+            if (
+                r1 < box_lo[0] or r1 > box_hi[0]
+                or r2 < box_lo[1] or r2 > box_hi[1]
+                or r3 < box_lo[2] or r3 > box_hi[2]
+            ):  # fmt: skip
+                status = 1
+            elif not on_plane and -side * t1 <= 0.0:
                 status = 2
-            if status < 0:
-                _sample(nodes, origin, inv_h, n_ref, periodic, r[0], r[1], r[2], s)
-        end[ray, :3] = r
-        end[ray, 3:] = t
+            else:
+                n, g1, g2, g3 = _sample(nodes, origin, inv_h, n_ref, periodic, r1, r2, r3)
+        end[ray, 0], end[ray, 1], end[ray, 2] = r1, r2, r3
+        end[ray, 3], end[ray, 4], end[ray, 5] = t1, t2, t3
         info[ray, 0] = steps
         info[ray, 1] = status
     return end, info

@@ -311,7 +311,7 @@ def run_bench(
         The short sweep (3 steps, 1 adaptive tolerance, 1 timed run).
     interps, precisions : sequence of str, optional
         Restrict the sweep (default: all the device supports).
-    kernel_shape : rimcl.optics.trace.KernelShape, optional
+    kernel_shape : rimcl.optics.shapes.KernelShape, optional
     progress : callable, optional
         Called with each finished row.
 

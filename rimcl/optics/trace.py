@@ -28,6 +28,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.fields.field import AnalyticField, Field
+from rimcl.optics.shapes import KernelShape, default_kernel_shape
 
 logger = logging.getLogger(__name__)
 
@@ -225,61 +226,6 @@ def default_tolerance(field, origins, x_end):
     else:
         span = float(np.max(np.abs(x_end - origins[:, 0]))) or 1.0
     return 0.01 * span / PAPER_PIXELS
-
-
-@dataclasses.dataclass(frozen=True)
-class KernelShape:
-    """How the kernel is built for a device (DESIGN §11).
-
-    Attributes
-    ----------
-    lanes : int
-        Rays advanced together by one work-item, in vector lanes (1, 2, 4, 8 or 16).
-    pocl_fast : bool
-        Force helpers inline and keep OpenCL library calls out of the hot loop (PoCL).
-    """
-
-    lanes: int = 1
-    pocl_fast: bool = False
-
-    def __post_init__(self):
-        if self.lanes not in (1, 2, 4, 8, 16):
-            raise RimclError(f"rays per work-item must be 1, 2, 4, 8 or 16, got {self.lanes}")
-
-
-#: Rays per work-item on CPUs: 8 lanes (float8: one AVX register in f32/f32c).
-CPU_LANES = 8
-#: Rays per work-item on PoCL for trilinear float states: 16 lanes, whose field sampler
-#: works on all lanes at once (cl/rimcl_field.h; 14-25 % faster than 8 lanes in runs of
-#: benchmarks/speed.py on the 2-core EPYC, the same bits).
-POCL_FLOAT_LANES = 16
-
-
-def default_kernel_shape(device, precision="f32c", interp="trilinear"):
-    """The kernel shape for a device (DESIGN §11): on CPUs 8 lanes, 16 on PoCL for a
-    trilinear float state, and the PoCL switch; one ray per work-item elsewhere (GPUs).
-
-    Parameters
-    ----------
-    device : pyopencl.Device
-    precision : str
-        A key of :data:`PRECISIONS`.
-    interp : str
-        A key of :data:`INTERPOLATIONS`.
-
-    Returns
-    -------
-    KernelShape
-    """
-    import pyopencl as cl
-
-    from rimcl.core.device import is_pocl
-
-    if device.type & cl.device_type.CPU:
-        pocl = is_pocl(device)
-        wide = pocl and precision != "f64" and interp == "trilinear"
-        return KernelShape(lanes=POCL_FLOAT_LANES if wide else CPU_LANES, pocl_fast=pocl)
-    return KernelShape(lanes=1, pocl_fast=False)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -737,8 +683,12 @@ def run_trace(
                 np.int32(stop - start),
             )
             work_items = -(-(stop - start) // shape.lanes)
+            local = None
+            if shape.group is not None:  # surplus work-items return at once (n_rays)
+                work_items = -(-work_items // shape.group) * shape.group
+                local = (shape.group,)
             launched = time.perf_counter()
-            cl.enqueue_nd_range_kernel(queue, kernel, (work_items,), None)
+            cl.enqueue_nd_range_kernel(queue, kernel, (work_items,), local)
             queue.finish()
             kernel_seconds += time.perf_counter() - launched
             cl.enqueue_copy(queue, raw_out[start:stop], rays_out_buf)
@@ -758,6 +708,7 @@ def run_trace(
         "precision": precision,
         "max_steps": int(max_steps),
         "rays_per_work_item": shape.lanes,
+        "kernel_shape": shape.describe(),
         "field": field.describe(),
         "sharma_steps": int(info[:, 3].sum(dtype=np.int64)),
         "kernel_seconds": kernel_seconds,
@@ -776,78 +727,6 @@ def run_trace(
         travel = float(np.sum(result.path_length[ok])) / field.n_ref
         config["mean_step"] = travel / steps if steps else None
     return result
-
-
-def straight_path_limit(field, step, x_end, origins, directions, precision="f32c"):
-    """The longest path (length units) :func:`rimcl.trace_rays` follows through the uniform
-    ``field`` at ``step`` before it gives up (its default ``max_steps``), for
-    :func:`straight_rays`."""
-    plan = plan_steps(field, step, x_end, origins, precision)
-    max_steps = _default_max_steps(field, plan.step, x_end, origins, directions)
-    return max_steps * plan.step * field.n_ref
-
-
-def straight_rays(field, origins, directions, *, x_end, max_length=np.inf):
-    """Rays through a uniform field (:attr:`rimcl.Field.is_uniform`): straight lines.
-
-    What :func:`rimcl.trace_rays` approximates step by step, in closed form and float64, with no
-    steps: the exit point on ``x1 = x_end`` is ``r0 + ((x_end - x1_0) / d1) d``, the exit
-    direction ``d``, so the image point is the start point (to rounding). A measurement's
-    reference pass (and a case with ``G = 0``) images through such a field; both engines
-    use this (the device engine in ``cl/fan.cl``, ``RIMCL_STRAIGHT``) with the same float64
-    operations.
-
-    Parameters
-    ----------
-    field : rimcl.Field
-        Uniform: only its reference index and its box (clamped fields) are used.
-    origins, directions : array_like, shape (N, 3)
-    x_end : float
-    max_length : float, optional
-        Rays that would reach the plane only after a longer path are ``max_steps``, as the
-        integrator gives up (:func:`straight_path_limit`).
-
-    Returns
-    -------
-    TraceResult
-        ``ok``; ``turned_back`` for rays that do not move towards the exit plane;
-        ``exit_side`` for rays that leave the box of a clamped field sideways before it;
-        ``max_steps`` for the others longer than ``max_length``.
-    """
-    origins, directions = _validate_rays(origins, directions)
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        run = (x_end - origins[:, 0]) / directions[:, 0]
-        end_pos = origins + run[:, None] * directions
-        end_dir = directions / np.linalg.norm(directions, axis=1, keepdims=True)
-        distance = (end_pos[:, 0] - origins[:, 0]) / end_dir[:, 0]
-        image_pos = end_pos - distance[:, None] * end_dir
-    image_pos[:, 0] = origins[:, 0]
-    status = np.zeros(len(origins), dtype=np.int8)
-    lateral = end_pos[:, 1:]
-    outside = np.any(lateral < field.box_lo[1:], axis=1) | np.any(lateral > field.box_hi[1:], 1)
-    finite = np.all(np.isfinite(end_pos), axis=1) & np.all(np.isfinite(end_dir), axis=1)
-    status[~finite] = STATUS_NAMES.index("non_finite")  # never ok (see _finish)
-    status[run > max_length] = STATUS_NAMES.index("max_steps")
-    status[outside] = STATUS_NAMES.index("exit_side")
-    status[~(run > 0) | ~np.isfinite(run)] = STATUS_NAMES.index("turned_back")
-    image_pos[status != 0] = np.nan
-    count = len(origins)
-    return TraceResult(
-        origins=origins,
-        directions=directions,
-        image_pos=image_pos,
-        end_pos=end_pos,
-        end_dir=end_dir,
-        deflection=angle_between(directions, end_dir),
-        deflection_angles=direction_angles(end_dir) - direction_angles(directions),
-        path_length=run,
-        optical_path=field.n_ref * run,
-        n_metric=np.zeros((count, 3)),
-        steps=np.zeros(count, dtype=np.int64),
-        status=status,
-        step=0.0,
-        config={"straight": True, "x_end": float(x_end)},
-    )
 
 
 def _finish(origins, directions, raw_out, info, step, config):

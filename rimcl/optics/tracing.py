@@ -76,9 +76,9 @@ def trace_rays(
         For ``step="adaptive"`` and ``auto``: the allowed error of the image points r'
         (length units; convert from pixels with the camera's pixel size). Default:
         :func:`rimcl.optics.trace.default_tolerance`, 0.01 pixel of the paper's camera.
-    kernel_shape : rimcl.optics.trace.KernelShape, optional
+    kernel_shape : rimcl.optics.shapes.KernelShape, optional
         Rays per work-item and the PoCL switch; default
-        :func:`rimcl.optics.trace.default_kernel_shape`.
+        :func:`rimcl.optics.shapes.default_kernel_shape`.
         For benchmarks; results do not depend on it.
 
     Returns

@@ -2,9 +2,18 @@
 
 Usable on any image pair (``rimcl piv analyze A.tif B.tif``). The algorithm:
 
+- the background removed from both frames first: a local minimum (over squares of the
+  first pass's window) smoothed by a box of the same side, so a constant or slowly
+  varying background moves no vector (a constant one changes nothing at all);
 - interrogation windows of ``window`` pixels on a regular grid with ``overlap``, all
   windows of a pass extracted at once (strided views) and correlated by batched real FFTs
   (circular correlation of the mean-subtracted windows, ``scipy.fft``);
+- a window is a vector only where both frames hold particle signal in it, judged on the
+  frames themselves (never on the deformed ones, whose interpolation spreads light into
+  empty windows): a particle image's peak (a pixel no darker than its 8 neighbours) lies
+  in the window and stands more than ``SIGNAL_THRESHOLD`` noise standard deviations above
+  the window's median (:mod:`rimcl.piv.validity`); the tail of a particle centred outside does
+  not count. A window without signal is invalid in every pass, whatever its correlation;
 - the integer peak refined by a 3-point Gaussian fit per axis (a parabola where a
   neighbour of the peak is not positive), and the peak ratio (highest peak over the
   highest value outside a 5 x 5 neighbourhood of it) per vector;
@@ -35,10 +44,8 @@ shape ``(rows, columns)`` of the vector grid; root attributes ``settings``, ``co
 ``versions`` (JSON), ``image_shape``, ``coordinates``.
 """
 
-import contextlib
 import dataclasses
 import time
-import warnings
 from pathlib import Path
 
 import h5py
@@ -46,10 +53,21 @@ import numpy as np
 import scipy.fft
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy.interpolate import CubicSpline
-from scipy.ndimage import map_coordinates, spline_filter
+from scipy.ndimage import (
+    map_coordinates,
+    minimum_filter,
+    spline_filter,
+    uniform_filter,
+)
 
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path, stamp_h5, to_json, versions
+from rimcl.piv.validity import (
+    noise_sigma,
+    normalized_median_test,
+    replace_outliers,
+    window_signal,
+)
 
 SCHEMA = "piv"
 SCHEMA_VERSION = 2  # 2: pixel centres at integer coordinates (1: at half-integers)
@@ -68,6 +86,16 @@ DEFORM_ORDER = 5
 #: the B-spline there depends on the zeros assumed beyond the edge. With 0, windows at the
 #: edges of a 2 px shift kept a bias of 0.01–0.02 px; with 2, below 1e-3 px.
 EDGE_MARGIN = 2
+
+
+#: Peak host bytes per image pixel of a PIV analysis: the frames in float64, their
+#: backgrounds, B-spline coefficients, deformed frames, masks and displacement fields
+#: (tracemalloc: 32 for one pass, 86-90 with deformation).
+PIV_BYTES_PER_PIXEL = 128
+#: Peak host bytes per pixel of all windows of a pass (windows overlap, so this is
+#: windows x side²): extracted windows of both frames, float64 copies, spectra,
+#: correlation planes and the signal test (tracemalloc: 56-57).
+PIV_BYTES_PER_WINDOW_PIXEL = 64
 
 
 @dataclasses.dataclass(frozen=True)
@@ -116,6 +144,11 @@ class PivSettings:
             raise RimclError(
                 f"the first window must be an even number of pixels >= the window "
                 f"({self.window}), got {self.first_window}"
+            )
+        if self.passes == 1 and first != self.window:
+            raise RimclError(
+                f"a first window ({self.first_window} px) needs 2 or more passes: one pass "
+                f"correlates the {self.window} px windows only"
             )
         if not (np.isfinite(self.outlier_eps) and self.outlier_eps > 0):
             raise RimclError(f"the outlier eps must be positive (pixels), got {self.outlier_eps}")
@@ -230,7 +263,8 @@ class PivResult:
     peak_ratio : ndarray, float64, shape (rows, columns)
         Highest correlation peak over the second highest, last pass (inf: no second peak).
     valid : ndarray, bool, shape (rows, columns)
-        False for outliers of the last pass's normalized median test (and failed peaks).
+        False for outliers of the last pass's normalized median test, windows without
+        particle signal and failed peaks.
     replaced : ndarray, bool, shape (rows, columns)
         True where ``dx, dy`` were replaced by the median of valid neighbours.
     settings : PivSettings
@@ -320,102 +354,6 @@ def correlate_windows(windows_a, windows_b):
     return dx.reshape(shape), dy.reshape(shape), ratio.reshape(shape), found.reshape(shape)
 
 
-def _neighbours(values):
-    """The 8 neighbours of every grid point, shape (8, rows, columns).
-
-    Beyond the edges, neighbours are extrapolated linearly from the next two rows (or
-    columns) inside, leaving out the edge vector itself: a linear field then has a
-    symmetric neighbourhood everywhere, so its edge vectors are neither flagged nor
-    pulled inwards when replaced. With fewer than 3 rows (columns) they are NaN.
-    """
-    rows, cols = values.shape
-    padded = np.full((rows + 2, cols + 2), np.nan)
-    padded[1:-1, 1:-1] = values
-    if rows >= 3:
-        padded[0, 1:-1] = 3 * values[1] - 2 * values[2]
-        padded[-1, 1:-1] = 3 * values[-2] - 2 * values[-3]
-    if cols >= 3:
-        padded[:, 0] = 3 * padded[:, 2] - 2 * padded[:, 3]
-        padded[:, -1] = 3 * padded[:, -3] - 2 * padded[:, -4]
-    return np.stack(
-        [
-            padded[1 + i : 1 + i + rows, 1 + j : 1 + j + cols]
-            for i in (-1, 0, 1)
-            for j in (-1, 0, 1)
-            if (i, j) != (0, 0)
-        ]
-    )
-
-
-def normalized_median_test(dx, dy, eps=0.1, threshold=2.0):
-    """Outliers by the normalized median test (Westerweel & Scarano 2005).
-
-    For each component ``u`` and its 3 x 3 neighbours ``u_i`` (the vector itself left out;
-    extrapolated beyond the edges, see :func:`_neighbours`):
-    ``r = |u - median(u_i)| / (median(|u_i - median(u_i)|) + eps)``;
-    a vector is an outlier if ``sqrt(r_x² + r_y²) > threshold`` or it is not finite.
-
-    Parameters
-    ----------
-    dx, dy : ndarray, shape (rows, columns)
-        Displacements (pixels); NaN for failed vectors.
-    eps : float
-        Noise floor of the residuals (pixels).
-    threshold : float
-
-    Returns
-    -------
-    ndarray, bool, shape (rows, columns)
-        True for outliers.
-    """
-    residuals = []
-    for component in (dx, dy):
-        near = _neighbours(component)
-        with np.errstate(invalid="ignore"), _quiet_all_nan():
-            median = np.nanmedian(near, axis=0)
-            spread = np.nanmedian(np.abs(near - median), axis=0)
-        residuals.append(np.abs(component - median) / (spread + eps))
-    with np.errstate(invalid="ignore"):
-        normalized = np.hypot(*residuals)
-        # a vector with no finite neighbour cannot be tested: it stands
-        return ~(np.isfinite(dx) & np.isfinite(dy)) | (normalized > threshold)
-
-
-@contextlib.contextmanager
-def _quiet_all_nan():
-    """Silence NumPy's warning for medians of all-NaN neighbourhoods (they give NaN)."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", "All-NaN slice encountered", RuntimeWarning)
-        yield
-
-
-def replace_outliers(dx, dy, outliers):
-    """Replace outliers by the median of their valid (or already replaced) neighbours.
-
-    Sweeps until every outlier with a finite neighbour is filled; one with none stays NaN.
-
-    Returns
-    -------
-    dx, dy : ndarray, float64, shape (rows, columns)
-    """
-    dx = np.where(outliers, np.nan, dx)
-    dy = np.where(outliers, np.nan, dy)
-    missing = np.isnan(dx) | np.isnan(dy)
-    for _ in range(sum(dx.shape)):
-        if not missing.any():
-            break
-        with _quiet_all_nan():
-            fill_x = np.nanmedian(_neighbours(dx), axis=0)
-            fill_y = np.nanmedian(_neighbours(dy), axis=0)
-        fillable = missing & np.isfinite(fill_x) & np.isfinite(fill_y)
-        if not fillable.any():
-            break
-        dx = np.where(fillable, fill_x, dx)
-        dy = np.where(fillable, fill_y, dy)
-        missing &= ~fillable
-    return dx, dy
-
-
 def _spline_1d(nodes, values, points, axis):
     """Cubic spline through ``values`` along ``axis``, continued by its end tangents.
 
@@ -493,13 +431,78 @@ def _deform(coefficients, shift_x, shift_y):
     return image, inside
 
 
-def _read_pair(image_a, image_b):
+def remove_background(image, size):
+    """``image`` less its background: the local minimum over ``size`` px squares, boxed.
+
+    A constant added to a frame cancels exactly; the box filter spreads the minimum's
+    steps, so what is subtracted varies slowly across a window.
+    """
+    background = uniform_filter(minimum_filter(image, size=size, mode="nearest"), size=size)
+    return image - background
+
+
+def check_piv_memory(shape, settings, what="PIV"):
+    """Refuse, before anything is allocated, an analysis that cannot fit in host memory.
+
+    Parameters
+    ----------
+    shape : tuple of 2 int
+        Frame ``(rows, columns)``.
+    settings : PivSettings
+    what : str
+        For the message.
+
+    Raises
+    ------
+    RimclError
+        The size needed and available, and which settings need less.
+    """
+    from rimcl.core.memory import check_host
+
+    pixels = int(shape[0]) * int(shape[1])
+    window_pixels = 0
+    for size in settings.window_sizes():
+        grid = WindowGrid.for_image(shape, size, settings.overlap)
+        window_pixels = max(window_pixels, len(grid.rows) * len(grid.cols) * size * size)
+    needed = PIV_BYTES_PER_PIXEL * pixels + PIV_BYTES_PER_WINDOW_PIXEL * window_pixels
+    check_host(
+        needed,
+        f"{what} of {shape[1]} x {shape[0]} px frames with {settings.window} px windows "
+        f"at overlap {settings.overlap:g} ({window_pixels / pixels:.3g} window pixels per "
+        "frame pixel)",
+        "use a smaller --overlap, a larger --window or smaller frames",
+    )
+
+
+def tiff_shape(path):
+    """``(rows, columns)`` and dtype of the first image of a TIFF file, from its header.
+
+    Returns
+    -------
+    shape : tuple of int
+    dtype : numpy.dtype
+    """
+    import tifffile
+
+    path = Path(path)
+    if not path.is_file():
+        raise RimclError(f"image {path} does not exist")
+    try:
+        with tifffile.TiffFile(path) as tif:
+            series = tif.series[0]
+            return tuple(int(n) for n in series.shape), np.dtype(series.dtype)
+    except Exception as exc:  # tifffile raises many types for a bad file
+        raise RimclError(f"{path} is not a readable TIFF image ({exc})") from None
+
+
+def _read_pair(image_a, image_b, settings):
     a = np.asarray(image_a)
     b = np.asarray(image_b)
     if a.ndim != 2 or b.ndim != 2:
         raise RimclError(f"PIV needs two grey images (2-D), got shapes {a.shape} and {b.shape}")
     if a.shape != b.shape:
         raise RimclError(f"the two PIV images differ in shape: {a.shape} and {b.shape}")
+    check_piv_memory(a.shape, settings)
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
         raise RimclError("a PIV image holds NaN or infinite values")
     return a.astype(np.float64), b.astype(np.float64)
@@ -519,7 +522,11 @@ def analyze_pair(image_a, image_b, settings=None):
     PivResult
     """
     settings = PivSettings() if settings is None else settings
-    a, b = _read_pair(image_a, image_b)
+    a, b = _read_pair(image_a, image_b, settings)
+    sigma_a, sigma_b = noise_sigma(np.asarray(image_a)), noise_sigma(np.asarray(image_b))
+    signal_a, signal_b = a, b
+    first = max(settings.window_sizes())
+    a, b = remove_background(a, first), remove_background(b, first)
     coefficients = None
     previous = None
     seconds = []
@@ -551,6 +558,9 @@ def analyze_pair(image_a, image_b, settings=None):
         res_x, res_y, ratio, found = correlate_windows(
             grid.extract(deformed_a), grid.extract(deformed_b)
         )
+        signal = window_signal(signal_a, grid, sigma_a) & window_signal(signal_b, grid, sigma_b)
+        found &= signal
+        ratio = np.where(found, ratio, np.nan)
         dx = np.where(found, predictor_x + res_x, np.nan)
         dy = np.where(found, predictor_y + res_y, np.nan)
         outliers = normalized_median_test(dx, dy, settings.outlier_eps, settings.outlier_threshold)
@@ -649,3 +659,42 @@ def write_tiff(path, counts, config=None, overwrite=True):
     note = to_json({"config": config or {}, "versions": versions()})
     with atomic_path(path, overwrite=overwrite) as tmp:
         tifffile.imwrite(tmp, counts.astype(np.uint16), photometric="minisblack", description=note)
+
+
+def analyze_files(path_a, path_b, output, settings=None, overwrite=False):
+    """What ``rimcl piv analyze`` does: read two TIFF frames, correlate, write HDF5.
+
+    Parameters
+    ----------
+    path_a, path_b : str or Path
+        Frames A and B.
+    output : str or Path
+        The HDF5 file of :func:`write_piv`.
+    settings : PivSettings, optional
+    overwrite : bool
+
+    Returns
+    -------
+    PivResult
+    """
+    from rimcl.core.memory import check_host
+    from rimcl.core.provenance import check_output
+
+    check_output(output, overwrite)
+    settings = PivSettings() if settings is None else settings
+    headers = [tiff_shape(path) for path in (path_a, path_b)]
+    for path, (shape, dtype) in zip((path_a, path_b), headers, strict=True):
+        if len(shape) != 2:
+            raise RimclError(
+                f"{path} must hold one grey image (2-D), got an array of shape {shape}"
+            )
+        # a compressed file may expand to far more than its size on disk
+        check_host(2 * np.prod(shape, dtype=float) * dtype.itemsize, f"reading {path} {shape}")
+    if headers[0][0] != headers[1][0]:
+        raise RimclError(f"the two PIV images differ in shape: {headers[0][0]} and {headers[1][0]}")
+    check_piv_memory(headers[0][0], settings)
+    image_a, image_b = read_tiff(path_a), read_tiff(path_b)
+    result = analyze_pair(image_a, image_b, settings)
+    inputs = {"image_a": str(Path(path_a).resolve()), "image_b": str(Path(path_b).resolve())}
+    write_piv(output, result, {"inputs": inputs}, overwrite=overwrite)
+    return result

@@ -226,8 +226,8 @@ def _write_pivlab(tmp, result, flags, mask, scaled, record):
 def run_analyze(
     path_a, path_b, output, settings=None, exports=(), pixel_size_m=None, dt_s=None, overwrite=False
 ):
-    """What ``rimcl piv analyze`` does: read two TIFF frames, correlate, write the vectors
-    (:func:`rimcl.piv.analysis.write_piv`) and each export (:func:`export_vectors`, with
+    """What ``rimcl piv analyze`` does: :func:`rimcl.piv.analysis.analyze_files` (read,
+    check, correlate, write the vectors), then each export (:func:`export_vectors`, with
     the :func:`light_mask` of the frames).
 
     Parameters
@@ -246,23 +246,22 @@ def run_analyze(
     -------
     PivResult
     """
-    from rimcl.piv.analysis import analyze_pair, read_tiff, write_piv
+    from rimcl.piv.analysis import analyze_files, read_tiff
 
     if (pixel_size_m is None) != (dt_s is None):
         raise RimclError("give both the pixel size (m) and the time between frames (s), or none")
-    for path in (output, *exports):
+    for path in exports:
         check_output(path, overwrite)
-        if path != output and Path(path).suffix.lower() not in FORMATS:
+        if Path(path).suffix.lower() not in FORMATS:
             raise RimclError(
                 f"cannot export vectors to {Path(path).name}: give a path ending in "
                 + ", ".join(FORMATS)
             )
-    image_a, image_b = read_tiff(path_a), read_tiff(path_b)
-    result = analyze_pair(image_a, image_b, settings)
-    inputs = {"image_a": str(Path(path_a).resolve()), "image_b": str(Path(path_b).resolve())}
-    write_piv(output, result, {"inputs": inputs}, overwrite=overwrite)
+    result = analyze_files(path_a, path_b, output, settings, overwrite=overwrite)
     if exports:
+        image_a, image_b = read_tiff(path_a), read_tiff(path_b)
         mask = light_mask(image_a, image_b, result)
+        inputs = {"image_a": str(Path(path_a).resolve()), "image_b": str(Path(path_b).resolve())}
         config = {"inputs": inputs, "piv": result.settings.describe()}
         for path in exports:
             export_vectors(path, result, mask, pixel_size_m, dt_s, config, overwrite)

@@ -247,6 +247,19 @@ def _piv_scene(source, piv):
     scene = Scene.from_grid(
         source.origin, source.spacing, source.shape, source.boundary, x_sheet, piv.depth
     )
+    thickness = piv.imaging.thickness(scene)
+    n1 = int(source.shape[-1])
+    extent = float(source.spacing[0]) * (n1 if scene.periodic else n1 - 1)
+    if 2 * SEED_HALF_WIDTH * thickness > extent:
+        # the tracers would be seeded beyond the field (or over several of its periods):
+        # most of them outside it, the density far below the one asked for
+        half = SEED_HALF_WIDTH * thickness
+        raise RimclError(
+            f"the light sheet ({thickness:g} thick, tracers seeded ± {half:g} around it) "
+            f"is thicker than the field along x1 ({extent:g}); use a sheet "
+            f"thickness (--sheet-thickness, piv.sheet_thickness) up to "
+            f"{extent / (2 * SEED_HALF_WIDTH):g}"
+        )
     if scene.periodic or sheet_plane is not None:
         # tracers below a clamped grid see its edge values (the clamped boundary)
         return scene
@@ -256,12 +269,32 @@ def _piv_scene(source, piv):
         return Scene.from_grid(
             source.origin, source.spacing, source.shape, source.boundary, low + half, piv.depth
         )
-    if scene.x_sheet - half < low:
+    if scene.x_sheet - half < low or scene.x_sheet + half > low + extent:
         raise RimclError(
-            f"the tracers around the sheet x1 = {scene.x_sheet:g} (± {half:g}) reach below "
-            f"the field (x1 >= {low:g}); move the sheet inside or make it thinner"
+            f"the tracers around the sheet x1 = {scene.x_sheet:g} (± {half:g}) reach beyond "
+            f"the field ({low:g} <= x1 <= {low + extent:g}); move the sheet inside or make "
+            "it thinner"
         )
     return scene
+
+
+def check_piv_scene(field, piv):
+    """Refuse, before anything is rendered, a PIV measurement whose sheet does not fit the
+    field (as :func:`run_piv_render` would, after a study had written files).
+
+    Parameters
+    ----------
+    field : str, Path or None
+        The field file (None: the shipped sample).
+    piv : PivConfig
+    """
+    from rimcl.ptv.field_source import open_source
+
+    with ExitStack() as stack:
+        source, _ = open_source(field, stack)
+        if piv.box is not None:
+            source = CroppedSource(source, piv.box)
+        _piv_scene(source, piv)
 
 
 def _sheet_plane(source):

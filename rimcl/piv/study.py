@@ -32,7 +32,8 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path, stamp_h5, to_json
-from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair
+from rimcl.core.tables_h5 import label_grid
+from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair, check_piv_memory
 from rimcl.piv.imaging_config import IMAGE_AXES, PivImaging, frame_pixels
 from rimcl.piv.render import PivConfig, run_piv_render
 from rimcl.piv.truth import window_means
@@ -444,7 +445,16 @@ def write_piv_case(path, case, overwrite=True, record=None):
             h5.attrs[STUDY_RECORD] = to_json(record)
         for name in VECTOR_COLUMNS:
             h5.create_dataset(name, data=case.vectors[name])
+        # named dimensions (row along x3, column along x2; window centres in pixels) and
+        # units, for xarray.open_dataset(path)
+        x, y = np.asarray(case.vectors["x"]), np.asarray(case.vectors["y"])
+        label_grid(h5, y[:, 0], x[0, :], _vector_unit)
         stamp_h5(h5, case.render.config, case.render.device)
+
+
+def _vector_unit(name):
+    """Units of a PIV case file's column: positions and displacements in pixels."""
+    return "px" if name in ("x", "y", "row", "column") or name.startswith(("dx_", "dy_")) else "1"
 
 
 def load_piv_case(path):
@@ -550,6 +560,8 @@ def configs_from_study(study):
         depth=shared.depth,
         seed=shared.tracers.seed,
     )
+    # the windows must fit the frames, and the analysis the memory, before a study writes
+    check_piv_memory((piv.imaging.pixels,) * 2, piv.settings, "the study's PIV")
     camera = dataclasses.replace(shared.camera, fan=max(1, round(math.sqrt(rays))), pupil_rays=rays)
     configs = {
         "camera": camera,
@@ -567,28 +579,41 @@ def study_case_path(out_dir, case):
     return Path(out_dir) / STUDY_FOLDER / f"{case}.h5"
 
 
-def is_current(path, record):
-    """Whether a study's PIV case file is complete and was made for the scene ``record``."""
+def case_file_problem(path, record, case):
+    """Why a study's PIV case file cannot be kept, or None if it can.
+
+    It is kept only if it is a complete PIV case file of ``case`` (its ``case``
+    attribute, as the PTV case files are checked) made for the scene ``record``.
+
+    Returns
+    -------
+    str or None
+        One line saying why the file must be measured again.
+    """
     try:
         with h5py.File(path, "r") as h5:
             complete = h5.attrs.get("rimcl_schema") == SCHEMA and "stats" in h5.attrs
-            complete = complete and all(name in h5 for name in VECTOR_COLUMNS)
+            if not (complete and all(name in h5 for name in VECTOR_COLUMNS)):
+                return "unreadable or incomplete"
+            held = h5.attrs.get("case")
             recorded = h5.attrs.get(STUDY_RECORD)
-            return (
-                complete
-                and recorded is not None
-                and json.loads(recorded) == json.loads(to_json(record))
-            )
-    except (OSError, ValueError):
-        return False
+            if held != case:
+                return f"holds case {held!r}, not {case!r}"
+            if recorded is None or json.loads(recorded) != json.loads(to_json(record)):
+                return "made for another scene"
+    except (OSError, ValueError) as exc:
+        return f"unreadable ({type(exc).__name__})"
+    return None
 
 
-def run_study_cases(study, out_dir, record, cases, *, force=False, report=None, progress=False):
+def run_study_cases(
+    study, out_dir, record, cases, *, force=False, report=None, before_write=None, progress=False
+):
     """The PIV case files of a study: one per case, atomic and resumable.
 
-    A case whose file :func:`is_current` is kept (unless ``force``); the others are
-    measured, all on the tracers, truth and uniform-medium vectors of the first one
-    measured.
+    A case whose file has no :func:`case_file_problem` is kept (unless ``force``); the
+    others are measured (one line saying why), all on the tracers, truth and
+    uniform-medium vectors of the first one measured.
 
     Parameters
     ----------
@@ -603,6 +628,9 @@ def run_study_cases(study, out_dir, record, cases, *, force=False, report=None, 
         Measure every case again.
     report : callable, optional
         Called with one line of text per step.
+    before_write : callable, optional
+        Called without arguments before the first case file is written (the study writes
+        its ``scene.toml`` then, once the scene has proven itself).
     progress : bool
         A progress bar over each case's tracers imaged (on a terminal).
 
@@ -625,10 +653,12 @@ def run_study_cases(study, out_dir, record, cases, *, force=False, report=None, 
         path = study_case_path(out_dir, name)
         paths.append(path)
         step = f"[PIV {index}/{len(cases)}] {name}"
-        if not force and is_current(path, record):
+        reason = None if force or not path.exists() else case_file_problem(path, record, name)
+        if path.exists() and not force and reason is None:
             say(f"{step}: finished earlier, kept ({path})")
             continue
-        say(f"{step}: imaging and correlating")
+        again = f"{path.name} {reason}; imaging and correlating again"
+        say(f"{step}: " + (again if reason else "imaging and correlating"))
         start = time.perf_counter()
         case = run_piv_case(
             study.field_path or None,
@@ -639,6 +669,8 @@ def run_study_cases(study, out_dir, record, cases, *, force=False, report=None, 
             **configs,
         )
         reference = case.reference
+        if before_write is not None:
+            before_write()
         write_piv_case(path, case, overwrite=True, record=record)
         ran.append(name)
         say(f"{step}: done in {time.perf_counter() - start:.1f} s")

@@ -19,7 +19,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rimcl.core.provenance import atomic_path, check_output, stamp_h5
+from rimcl.core.provenance import atomic_paths, check_output, stamp_h5
 from rimcl.piv.analysis import write_tiff
 from rimcl.piv.imaging_config import frame_pixels, sheet_intensity
 
@@ -161,7 +161,9 @@ def check_outputs(prefix, overwrite=False):
 
 
 def write_piv_render(prefix, result, overwrite=True):
-    """Write the four TIFF frames and the ground-truth HDF5 file of a :class:`PivRender`.
+    """Write the four TIFF frames and the ground-truth HDF5 file of a :class:`PivRender`,
+    as one set: all five are renamed into place once all are written, so a failure leaves
+    the files of an earlier run whole (:func:`rimcl.core.provenance.atomic_paths`).
 
     Parameters
     ----------
@@ -175,16 +177,22 @@ def write_piv_render(prefix, result, overwrite=True):
     dict of str to Path
     """
     paths = output_paths(prefix)
-    check_outputs(prefix, overwrite)
+    with atomic_paths(paths, overwrite) as temps:
+        _write_set(temps, result)
+    return paths
+
+
+def _write_set(paths, result):
+    """The five files of :func:`write_piv_render` at ``paths`` (temporary names)."""
     frames = {"field": result.field, "uniform": result.uniform}
     for medium, pair in frames.items():
         for index, frame in enumerate("AB"):
-            write_tiff(paths[f"{medium}_{frame}"], pair.images[index], result.config, overwrite)
+            write_tiff(paths[f"{medium}_{frame}"], pair.images[index], result.config)
     reference = result.reference
     shape = result.imaging.frame_shape(result.scene, result.camera)
     pixels = frame_pixels(result.renderer, shape, reference.positions[..., 1:])
     thickness = result.imaging.thickness(result.scene, result.camera)
-    with atomic_path(paths["truth"], overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
+    with h5py.File(paths["truth"], "w") as h5:
         h5.attrs["rimcl_schema"] = TRUTH_SCHEMA
         h5.attrs["schema_version"] = TRUTH_SCHEMA_VERSION
         h5.attrs["case"] = result.case
@@ -223,4 +231,3 @@ def write_piv_render(prefix, result, overwrite=True):
                 group.attrs[name] = value
             group.attrs["saturated_pixels"] = np.asarray(pair.saturated_pixels)
         stamp_h5(h5, result.config, result.device)
-    return paths

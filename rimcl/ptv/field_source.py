@@ -83,14 +83,41 @@ class CaseIndex:
         )
 
 
+#: The case name of a field file that stores its own refractive index (runs as is).
+DELTA_N_CASE = "delta_n"
+#: A fluid case fits a density field whose values reach within this share of the light and
+#: heavy densities' difference of either (the mixing sample: 1.0004 … 1.1023 of 1 … 1.105)
+_DENSITY_FIT = 0.25
+
+
 def case_of(source, case, k_rho, fluid_config):
-    """The :class:`CaseIndex` of a case; files of δn carry their own index."""
+    """The :class:`CaseIndex` of a case; files of δn carry their own index.
+
+    A fluid case (``dT=``, ``dS=``) maps a density field's two fluids onto the fluid's
+    ``n(T)`` or ``n(S)``: the light and heavy densities are the scene's
+    (``fluid.light_density``, ``fluid.heavy_density``), else those the file records
+    (``rho_light``, ``rho_heavy``), else 1 and 1.105. A field whose densities do not span
+    them is refused, naming both, as is a fluid case on a file that stores its index.
+    """
     from rimcl.fields.cases import fluid_case, resolve_k_rho
 
+    if case is not None and str(case).strip() == DELTA_N_CASE:
+        case = None
+        if getattr(source, "kind", "density") != "delta_n":
+            raise RimclError(
+                f"case {DELTA_N_CASE} runs a field file that stores its refractive index; "
+                f"{getattr(source, 'path', 'this field')} stores a density: give a case "
+                "(C0..C4, G=<value>, dT=<K>, dS=<g/kg>)"
+            )
     if getattr(source, "kind", "density") == "delta_n":
         if case is not None or k_rho is not None:
-            raise RimclError("this field file stores delta_n directly; --case/--k-rho do not apply")
-        return CaseIndex("delta_n", float("nan"))
+            scalar = getattr(source, "attrs", {}).get("scalar", "delta_n")
+            raise RimclError(
+                f"{getattr(source, 'path', 'this field file')} holds a {scalar} field as its "
+                f"refractive index: it runs as is (case {DELTA_N_CASE}); case "
+                f"{case if case is not None else f'K*rho={k_rho}'} does not apply"
+            )
+        return CaseIndex(DELTA_N_CASE, float("nan"))
     difference = None if case is None else fluid_case(case)
     if difference is None:
         return CaseIndex(*resolve_k_rho(case, k_rho))
@@ -102,14 +129,50 @@ def case_of(source, case, k_rho, fluid_config):
         raise RimclError(
             f"case {case}: a {fluid.kind} case varies the {fluid.unit}, not {quantity}"
         )
-    return CaseIndex(
-        str(case).strip(),
-        float("nan"),
-        fluid,
-        value,
-        float(fluid_config.light_density),
-        float(fluid_config.heavy_density),
+    light, heavy = fluid_densities(source, fluid_config)
+    check_density_fit(source, case, light, heavy)
+    return CaseIndex(str(case).strip(), float("nan"), fluid, value, light, heavy)
+
+
+def fluid_densities(source, fluid_config):
+    """The light and heavy densities of a fluid case: the scene's, else the file's, else
+    1 and 1.105 (:data:`rimcl.fields.media.MIXING_DENSITIES`)."""
+    from rimcl.fields.media import MIXING_DENSITIES
+
+    attrs = getattr(getattr(source, "source", source), "attrs", None) or {}
+    pairs = (
+        (fluid_config.light_density, fluid_config.heavy_density),
+        (attrs.get("rho_light"), attrs.get("rho_heavy")),
+        MIXING_DENSITIES,
     )
+    chosen = [next(float(p[k]) for p in pairs if p[k] is not None) for k in (0, 1)]
+    if not chosen[1] > chosen[0]:
+        raise RimclError(
+            f"the heavy density ({chosen[1]:g}) must exceed the light one ({chosen[0]:g})"
+        )
+    return tuple(chosen)
+
+
+def check_density_fit(source, case, light, heavy):
+    """Refuse a fluid case on a density field whose values do not span ``light … heavy``.
+
+    The field's range is the file's recorded ``scalar_range`` or that of its first frame.
+    """
+    whole = getattr(source, "source", source)  # a box cut of a file: the whole file
+    recorded = (getattr(whole, "attrs", None) or {}).get("scalar_range")
+    if recorded is not None and len(recorded) == 2:
+        lo, hi = (float(v) for v in recorded)
+    else:
+        density = whole.density(0)
+        lo, hi = float(np.min(density)), float(np.max(density))
+    slack = _DENSITY_FIT * (heavy - light)
+    if lo < light - slack or hi > heavy + slack or (hi - lo) < (heavy - light) - 2 * slack:
+        raise RimclError(
+            f"case {case}: the field's densities ({lo:.6g} … {hi:.6g}) do not fit the fluid "
+            f"model's light and heavy fluids ({light:.6g} and {heavy:.6g}); set "
+            "fluid.light_density and fluid.heavy_density to the field's two fluids, or "
+            "import the temperature or salinity itself (rimcl field import)"
+        )
 
 
 def _load_frame(source, frame, time, k_rho):

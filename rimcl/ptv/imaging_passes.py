@@ -18,7 +18,8 @@ from rimcl.core.errors import RimclError
 from rimcl.imaging.centroid import TracerFlag
 from rimcl.imaging.frames import empty_columns, image_batch
 from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS
-from rimcl.optics.trace import STATUS_NAMES, straight_path_limit, straight_rays
+from rimcl.optics.straight import straight_path_limit, straight_rays
+from rimcl.optics.trace import STATUS_NAMES
 from rimcl.optics.tracing import trace_rays
 from rimcl.ptv.field_source import reference_step, uniform_like
 from rimcl.ptv.render_file import Reference

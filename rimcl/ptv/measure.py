@@ -125,6 +125,8 @@ def run_render(
             "engine": config.run.engine,
             "tracking_substeps": TRACKING_SUBSTEPS,
             "reference_step": reference_step(config.integrator.step, source),
+            "length_m": config.camera.length_m,
+            "time_s": config.time.time_s,
         }
         if calibration is not None:
             run_config["auto"] = calibration
@@ -217,6 +219,9 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
         "fov_hi": scene.fov_hi,
         "field": config["field"],
     }
+    for scale in ("length_m", "time_s"):  # metres and seconds per field unit, where known
+        if config.get(scale) is not None:
+            attrs[scale] = float(config[scale])
     ray_attrs = {f"count_{k}": v for k, v in measured.counts().items()}
     ray_attrs.update({f"ref_count_{k}": v for k, v in reference.ray_counts.items()})
     ray_attrs["ray_steps"] = measured.ray_steps

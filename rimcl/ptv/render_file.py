@@ -15,6 +15,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path, check_output, stamp_h5, to_json
+from rimcl.core.tables_h5 import label_table
 
 SCHEMA = "render"
 
@@ -195,6 +196,11 @@ def write_render(path, result, overwrite=False):
     import h5py
 
     path = Path(path)
+    length_m, time_s = result.attrs.get("length_m"), result.attrs.get("time_s")
+    # SI value of one unit of a column (m, m/s, m/s², s), where the scales are known
+    si = {"L0": length_m, "T0": time_s}
+    if length_m is not None and time_s is not None:
+        si.update({"L0/T0": length_m / time_s, "L0/T0^2": length_m / time_s**2})
     with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
         for name, value in result.attrs.items():
             h5.attrs[name] = value
@@ -207,6 +213,12 @@ def write_render(path, result, overwrite=False):
             group = h5.create_group(group_name)
             for name, values in table.items():
                 group.create_dataset(name, data=values)
+            # named dimensions and units, for xarray.open_dataset(path, group=...)
+            index = {"rays": "ray", "tracers": None}.get(group_name, "id")
+            label_table(group, index)
+            for dataset in group.values():
+                if si.get(dataset.attrs.get("units")) is not None:
+                    dataset.attrs["si_per_unit"] = si[dataset.attrs["units"]]
         for name, value in result.ray_attrs.items():
             h5["rays"].attrs[name] = value
     return path

@@ -261,7 +261,8 @@ class MieConfig:
 @dataclasses.dataclass(frozen=True)
 class FluidConfig:
     """The fluid of ``dT=…`` / ``dS=…`` cases (:class:`rimcl.fields.media.Fluid`); ``kind = ""``
-    for none. ``light_density``, ``heavy_density``: the field's two fluids (dimensionless)."""
+    for none. ``light_density``, ``heavy_density``: the field's two fluids (dimensionless;
+    None: those the field file records, else 1 and 1.105)."""
 
     kind: str = ""
     temperature_c: float = 20.0
@@ -269,8 +270,8 @@ class FluidConfig:
     pressure_pa: float = 101_325.0
     relative_humidity: float = 0.0
     wavelength_nm: float = 532.0
-    light_density: float = 1.0
-    heavy_density: float = 1.105
+    light_density: float = None
+    heavy_density: float = None
 
     def build(self):
         """The fluid, or None without one."""
@@ -337,6 +338,8 @@ class TimeConfig:
     fit_window, fit_order : int
         The sliding polynomial fit of the tracks (as Lagrangian PTV codes do): odd window
         of frames and polynomial order; fitted estimates need ``frames >= fit_window``.
+    time_s : float, optional
+        Seconds per field time unit (recorded in the outputs for physical units).
     """
 
     frames: int = 3
@@ -344,6 +347,7 @@ class TimeConfig:
     dt: float = None
     fit_window: int = 5
     fit_order: int = 2
+    time_s: float = None
 
     def __post_init__(self):
         if not 1 <= int(self.frames) <= MAX_FRAMES:
@@ -546,6 +550,7 @@ class MeasureConfig:
                 dt=scene["time"]["dt"],
                 fit_window=scene["time"]["fit_window"],
                 fit_order=scene["time"]["fit_order"],
+                time_s=field["time_s"],
             ),
             run=RunConfig(
                 device=run["device"] or None,

@@ -19,10 +19,12 @@ class SceneKey:
     default : object
         Value when the key is absent; ``None`` for keys whose default is decided by the
         pipeline (the printed scene shows them commented out, with ``example``).
-    kind : {"str", "int", "float", "bool", "names", "thresholds", "box", "ints", "vector"}
+    kind : {"str", "int", "float", "bool", "names", "thresholds", "box", "ints", "vector", \
+            "floats", "tables"}
         ``names``: a list of strings; ``thresholds``: a table of case name to number;
         ``box``: three ``[lo, hi]`` pairs; ``ints``: a list of whole numbers >= 1;
-        ``vector``: three numbers.
+        ``vector``: three numbers; ``floats``: a list of numbers; ``tables``: a list of
+        tables (``[[section.name]]``, their keys checked by the stage using them).
     doc : str
         What the key means, with units.
     choices : tuple of str

@@ -58,8 +58,9 @@ def imaging_keys():
             "frames",
             5,
             "int",
-            "frames imaged, time.dt apart (3: the paper; more for fitted tracks)",
-            positive=True,
+            "frames imaged, time.dt apart (3: the paper, the fewest an acceleration needs; "
+            "more for fitted tracks)",
+            minimum=3,
         ),
         SceneKey(
             "time",
@@ -76,8 +77,8 @@ def imaging_keys():
             "fit_window",
             5,
             "int",
-            "frames of the sliding polynomial fit of each track (odd; the fitted velocity "
-            "and acceleration need at least as many frames)",
+            "frames of the sliding polynomial fit of each track (odd, at most time.frames; "
+            "unset and more than the frames: the largest odd number of frames there are)",
             minimum=3,
         ),
         SceneKey("time", "fit_order", 2, "int", "order of the fitted polynomial", minimum=2),
@@ -170,7 +171,13 @@ def imaging_keys():
             example=2.0,
         ),
         SceneKey(
-            "camera", "f_number", None, "float", "see focal_length", positive=True, example=2.8
+            "camera",
+            "f_number",
+            None,
+            "float",
+            "see focal_length (>= 0.5: the limit of a lens in air)",
+            minimum=0.5,
+            example=2.8,
         ),
         SceneKey(
             "camera",
@@ -288,9 +295,29 @@ def imaging_keys():
             "length_m",
             None,
             "float",
-            "metres per field length unit (the field's physical size; the lens camera needs it)",
+            "metres per field length unit (the field's physical size; the lens camera needs "
+            "it); default: the field file's length_m",
             positive=True,
             example=0.0106,
+        ),
+        SceneKey(
+            "field",
+            "time_s",
+            None,
+            "float",
+            "seconds per field time unit (outputs in ms, mm/s, m/s²); default: the field "
+            "file's time_s, or field.length_m / field.velocity_m_s",
+            positive=True,
+            example=0.3,
+        ),
+        SceneKey(
+            "field",
+            "velocity_m_s",
+            None,
+            "float",
+            "metres per second of one field velocity unit: another way to give field.time_s",
+            positive=True,
+            example=0.035,
         ),
         SceneKey(
             "camera",
@@ -357,8 +384,8 @@ def imaging_keys():
             "lens camera: a flat window between fluid and lens (mm; 0: none)",
             minimum=0.0,
         ),
-        SceneKey("camera", "window_index", 1.52, "float", "window glass index", positive=True),
+        SceneKey("camera", "window_index", 1.52, "float", "window glass index", minimum=1.0),
         SceneKey(
-            "camera", "outside_index", 1.0, "float", "index between window and lens", positive=True
+            "camera", "outside_index", 1.0, "float", "index between window and lens", minimum=1.0
         ),
     )

@@ -56,7 +56,7 @@ def physics_keys():
             1.59,
             "float",
             "particle index (1.59 polystyrene, 1.45 DEHS)",
-            positive=True,
+            minimum=1.0,
         ),
         SceneKey("mie", "particle_absorption", 0.0, "float", "imaginary part of it", minimum=0.0),
         SceneKey(
@@ -65,7 +65,7 @@ def physics_keys():
             None,
             "float",
             "index around the particle; default: the [fluid]'s, else 1",
-            positive=True,
+            minimum=1.0,
             example=1.335,
         ),
         SceneKey("mie", "wavelength_nm", 532.0, "float", "vacuum wavelength (nm)", positive=True),
@@ -111,17 +111,21 @@ def physics_keys():
         SceneKey(
             "fluid",
             "light_density",
-            1.0,
+            None,
             "float",
-            "the field's light fluid (dimensionless density): the warm or fresh one",
+            "the field's light fluid (dimensionless density): the warm or fresh one; "
+            "default: the field file's rho_light, else 1.0",
             positive=True,
+            example=1.0,
         ),
         SceneKey(
             "fluid",
             "heavy_density",
-            1.105,
+            None,
             "float",
-            "the field's heavy fluid: the cold or salty one",
+            "the field's heavy fluid: the cold or salty one; default: the field file's "
+            "rho_heavy, else 1.105",
             positive=True,
+            example=1.105,
         ),
     )

@@ -58,8 +58,9 @@ def run_keys():
             "ptv",
             "str",
             "ptv: tracer tracks; piv: cross-correlation of full frames ([piv]); both: each "
-            "case both ways, compared in summary.md",
-            choices=("ptv", "piv", "both"),
+            "case both ways, compared in summary.md; lpt: 3-D tracking with several cameras "
+            "([rig], [illumination], [lpt])",
+            choices=("ptv", "piv", "both", "lpt"),
         ),
         SceneKey(
             "run",

@@ -160,7 +160,46 @@ def load_scene(path=None, overrides=None, preset=None):
         for case in set(preset_thresholds) - set(names):
             if thresholds.get(case) == preset_thresholds[case]:
                 del thresholds[case]
-    return validate_scene(raw, where)
+    return _field_scales(validate_scene(raw, where), where)
+
+
+def _field_scales(scene, where):
+    """Fill ``field.length_m`` and ``field.time_s`` from ``field.velocity_m_s`` and from
+    what the field file records (``rimcl field import`` writes both where its input says)."""
+    field = scene["field"]
+    recorded = {}
+    if field["length_m"] is None or field["time_s"] is None:
+        recorded = _recorded_scales(field["path"])
+    if field["length_m"] is None:
+        field["length_m"] = recorded.get("length_m")
+    if field["velocity_m_s"] is not None:
+        if field["length_m"] is None:
+            raise RimclError(f"field.velocity_m_s in {where} needs field.length_m")
+        time_s = field["length_m"] / field["velocity_m_s"]
+        if field["time_s"] is not None and not math.isclose(field["time_s"], time_s, rel_tol=1e-9):
+            raise RimclError(
+                f"field.time_s ({field['time_s']:g} s) and field.length_m / field.velocity_m_s "
+                f"({time_s:g} s) disagree in {where}: give one of them"
+            )
+        field["time_s"] = time_s
+    elif field["time_s"] is None:
+        field["time_s"] = recorded.get("time_s")
+    return scene
+
+
+def _recorded_scales(path):
+    """``length_m`` and ``time_s`` a field file records (nothing for a missing or foreign
+    file: its errors come where it is opened)."""
+    import h5py
+
+    if not path or not Path(path).is_file():
+        return {}
+    try:
+        with h5py.File(path, "r") as h5:
+            found = {key: float(h5.attrs[key]) for key in ("length_m", "time_s") if key in h5.attrs}
+    except (OSError, TypeError, ValueError):
+        return {}
+    return {k: v for k, v in found.items() if math.isfinite(v) and v > 0}
 
 
 def scene_text(scene):

@@ -53,6 +53,20 @@ def _check_value(key, value, where):
         ):
             raise RimclError(f"{name} must be a list of whole numbers >= 1, got {value!r}")
         return [int(v) for v in value]
+    if key.kind == "floats":
+        if not (
+            isinstance(value, list)
+            and value
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+            and all(math.isfinite(v) for v in value)
+        ):
+            raise RimclError(f"{name} must be a list of numbers, got {value!r}")
+        return [float(v) for v in value]
+    if key.kind == "tables":
+        # the stage that uses them checks their keys (rig.cameras: rimcl.lpt.config)
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise RimclError(f"{name} must be a list of tables ([[{key.dotted}]]), got {value!r}")
+        return value
     if key.kind == "vector":
         if not (
             isinstance(value, list)
@@ -106,16 +120,56 @@ def _check_cases(names, where):
     resolved = []
     for case in names:
         try:
-            if fluid_case(case) is not None:
+            if fluid_case(case) is not None or case.strip() == "delta_n":
                 resolved.append(case.strip())
                 continue
             resolved.append(resolve_k_rho(case=case)[0])
         except RimclError as exc:
             raise RimclError(f"{where}: {exc}{_suggest(case.upper(), CASES)}") from None
-    duplicates = sorted({name for name in resolved if resolved.count(name) > 1})
+    # one case however written: dT=3 and dT=3.0 are the same fluid difference
+    same = [fluid_case(name) or name for name in resolved]
+    repeated = [name for name, key in zip(resolved, same, strict=True) if same.count(key) > 1]
+    duplicates = sorted(set(repeated))
     if duplicates:
         raise RimclError(f"{where} names case {', '.join(duplicates)} more than once")
     return resolved
+
+
+def _check_combinations(scene, raw, where):
+    """Refuse keys that each pass but together ask for something that cannot be."""
+    time, camera, sensor = scene["time"], scene["camera"], scene["sensor"]
+    frames, window = time["frames"], time["fit_window"]
+    if window % 2 == 0:
+        raise RimclError(f"time.fit_window in {where} must be odd (centred fits), got {window}")
+    if window > frames and "fit_window" not in raw.get("time", {}):
+        # the default window on fewer frames (the paper's 3): fit what there is, never drop it
+        window = time["fit_window"] = frames if frames % 2 else frames - 1
+    if window > frames:
+        raise RimclError(
+            f"time.fit_window = {window} in {where} needs at least {window} frames, but "
+            f"time.frames = {frames}: raise time.frames or lower time.fit_window"
+        )
+    if time["fit_order"] >= window:
+        raise RimclError(
+            f"time.fit_order = {time['fit_order']} in {where} needs more than that many "
+            f"frames in its window (time.fit_window = {window})"
+        )
+    too_far = [m for m in time["dt_multiples"] if m > frames - 1]
+    if too_far:
+        raise RimclError(
+            f"time.dt_multiples {too_far} in {where} ask for frames {too_far[0]} apart, but "
+            f"time.frames = {frames} holds at most {frames - 1}: raise time.frames or drop them"
+        )
+    if len(camera["sensor_pixels"]) != 2:
+        raise RimclError(
+            f"camera.sensor_pixels in {where} must be two numbers [along x2, along x3], got "
+            f"{camera['sensor_pixels']}"
+        )
+    if sensor["peak_electrons"] > sensor["full_well_e"]:
+        raise RimclError(
+            f"sensor.peak_electrons = {sensor['peak_electrons']:g} in {where} is above the "
+            f"full well ({sensor['full_well_e']:g} e-): every tracer's peak would saturate"
+        )
 
 
 def validate_scene(raw, where="the scene"):
@@ -166,6 +220,7 @@ def validate_scene(raw, where="the scene"):
             f"cases {', '.join(fluid_cases)} in {where} need a fluid: set [fluid] kind "
             "(water, air or saltwater)"
         )
+    _check_combinations(scene, raw, where)
     unknown = set(scene["cases"]["thresholds"]) - set(scene["cases"]["names"])
     if unknown:
         raise RimclError(

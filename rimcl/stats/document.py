@@ -35,8 +35,9 @@ from pathlib import Path
 import numpy as np
 
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import versions
+from rimcl.core.provenance import STUDY_MARKER, versions
 from rimcl.stats.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, TracerBootstrap
+from rimcl.stats.consistency import scene_mismatches
 from rimcl.stats.convergence import convergence
 from rimcl.stats.error_blocks import (
     budget_part,
@@ -49,6 +50,7 @@ from rimcl.stats.peaks import discrete_mode, pdf_peak
 from rimcl.stats.render_file import OPTICS_COLUMNS, load_render
 from rimcl.stats.summaries import CONDITION_FRACTION, finite_or_none
 from rimcl.stats.tables import NOTE_COLUMN, area_changes, flagged_tracers, rows_of, write_json
+from rimcl.stats.units import case_units, write_tidy
 
 
 def _area_change_peak(tracers):
@@ -178,6 +180,7 @@ def case_statistics(tables):
     case["circularity_peak"] = pdf_peak(tracers["circularity_meas"])
     case["convergence"] = convergence(tables, kept, blocks, refraction)
     case["budget_verdict"] = budget_verdict(case)
+    case["units"] = case_units(tables, case=case)
     case["rays"] = {
         "n_rays": rays_total,
         "n_rays_ok": int(np.sum(tables.tracers["n_rays_ok"])),
@@ -252,7 +255,7 @@ def compute_stats(all_tables, config=None):
     }
 
 
-def run_stats(paths, out_dir, overwrite=False, figures=True, config=None):
+def run_stats(paths, out_dir, overwrite=False, figures=True, config=None, mixed=False):
     """Statistics (and figures) of several ``rimcl render`` files: what ``rimcl stats`` does.
 
     Parameters
@@ -268,14 +271,38 @@ def run_stats(paths, out_dir, overwrite=False, figures=True, config=None):
         Also draw the figures.
     config : dict, optional
         Extra configuration recorded in every output.
+    mixed : bool
+        Compare render files of different scenes (:mod:`rimcl.stats.consistency`); by
+        default they are refused, naming what differs.
 
     Returns
     -------
     dict
         The ``stats.json`` document.
+
+    Raises
+    ------
+    RimclError
+        Files of different scenes (unless ``mixed``), two files of one case, an output
+        that exists (unless ``overwrite``) or a study directory as ``out_dir`` (its
+        ``stats.json`` is the study's: never replaced, even with ``overwrite``).
     """
     out_dir = Path(out_dir)
+    if (out_dir / STUDY_MARKER).exists() or (
+        (out_dir / "scene.toml").is_file() and (out_dir / "cases").is_dir()
+    ):
+        raise RimclError(
+            f"{out_dir} is a rimcl study directory: its stats.json and figures belong to the "
+            "study (rerun rimcl study there); write these statistics to another --out"
+        )
     all_tables = check_cases([load_render(path) for path in paths])
+    differences = [] if mixed else scene_mismatches(all_tables)
+    if differences:
+        shown = "; ".join(differences[:3]) + ("; ..." if len(differences) > 3 else "")
+        raise RimclError(
+            f"the render files come from different scenes ({shown}); compare them anyway "
+            "with --mixed-scenes"
+        )
     stats_path = out_dir / "stats.json"
     for existing in (stats_path, out_dir / "figures") if figures else (stats_path,):
         if existing.exists() and not overwrite:
@@ -291,4 +318,5 @@ def run_stats(paths, out_dir, overwrite=False, figures=True, config=None):
 
         write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
     write_json(stats_path, stats, overwrite=True)
+    write_tidy(out_dir / "stats.csv", stats)
     return stats

@@ -7,6 +7,7 @@ it and refuses a bad one with one :class:`~rimcl.core.errors.RimclError` line.
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -102,6 +103,9 @@ class RenderTables:
     velocity_fit, acceleration_fit : dict of str to ndarray
         Velocity and acceleration of a sliding polynomial fit over several frames, same
         columns as ``velocity`` and ``acceleration``; ``{}`` when the file has none.
+    length_m, time_s : float or None
+        Metres per field length unit and seconds per field time unit, where the file
+        records them (root attributes of the same names).
     """
 
     path: Path
@@ -120,6 +124,8 @@ class RenderTables:
     provenance: dict
     velocity_fit: dict = dataclasses.field(default_factory=dict)
     acceleration_fit: dict = dataclasses.field(default_factory=dict)
+    length_m: float | None = None
+    time_s: float | None = None
 
     def all_tables(self):
         """The per-tracer tables: tracers, then every kinematic group (empty ones too)."""
@@ -257,5 +263,16 @@ def load_render(path):
             rays=rays,
             ray_counts=ray_counts,
             provenance=provenance,
+            length_m=_optional_scale(attrs, "length_m"),
+            time_s=_optional_scale(attrs, "time_s"),
             **kinematic,
         )
+
+
+def _optional_scale(attrs, key):
+    """A positive finite scale attribute, or None where absent (or not a number > 0)."""
+    try:
+        value = float(attrs[key])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) and value > 0 else None

@@ -39,6 +39,7 @@ import json
 import logging
 import os
 import re
+import signal
 import threading
 import time
 import uuid
@@ -46,6 +47,8 @@ from pathlib import Path
 
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path
+from rimcl.core.tables_h5 import ROW_DIMENSION
+from rimcl.study.scheduler import _import_distributed, check_scheduler, parse_scheduler
 
 try:
     from distributed import WorkerPlugin
@@ -55,32 +58,6 @@ except ImportError:  # the optional extra is missing: connect() says so in one l
 SHARD_DIR = "shards"
 #: Host memory (bytes) a worker may keep of a case's loaded frames for its next shard.
 FRAME_CACHE_BYTES = 4 << 30
-INSTALL_HINT = 'pip install "rimcl[distributed]"'
-
-
-def parse_scheduler(spec):
-    """What a scheduler spec asks for.
-
-    Parameters
-    ----------
-    spec : str
-        ``"local:N"`` (N worker processes on this machine) or the address of a running
-        Dask scheduler (``"tcp://HOST:PORT"``, any ``scheme://`` Dask accepts).
-
-    Returns
-    -------
-    ("local", int) or ("address", str)
-    """
-    text = str(spec).strip()
-    local = re.fullmatch(r"local:(\d+)", text)
-    if local and int(local.group(1)) >= 1:
-        return "local", int(local.group(1))
-    if re.fullmatch(r"[a-z]+://\S+", text):
-        return "address", text
-    raise RimclError(
-        f"scheduler {spec!r} (run.scheduler, --scheduler) must be local:N with N >= 1 "
-        "or a Dask scheduler address such as tcp://HOST:8786"
-    )
 
 
 def shard_ranges(count, size):
@@ -188,7 +165,10 @@ def read_shard(path):
             raise RimclError(f"{path} is not a shard file of a distributed study (no reference)")
 
         def table(name):
-            return None if name not in h5 else {k: v[()] for k, v in h5[name].items()}
+            if name not in h5:
+                return None
+            # the row dimension write_render adds is no column: merged files get their own
+            return {k: v[()] for k, v in h5[name].items() if k != ROW_DIMENSION}
 
         return RenderResult(
             attrs={k: v for k, v in h5.attrs.items() if k not in provenance},
@@ -424,16 +404,6 @@ def measure_shard(plugin, config, stamp, case, shard, path, reference_path=None,
     return {"path": path, "seconds": time.perf_counter() - start, "measured": True}
 
 
-def _import_distributed(spec):
-    try:
-        import distributed
-    except ImportError:
-        raise RimclError(
-            f"scheduler {spec!r} needs Dask distributed, which is not installed: {INSTALL_HINT}"
-        ) from None
-    return distributed
-
-
 @contextlib.contextmanager
 def _quiet_dask():
     """Dask's own logging at WARNING (a lost worker, not every connection) while it runs
@@ -446,6 +416,20 @@ def _quiet_dask():
         yield
     finally:
         logger.setLevel(previous)
+
+
+@contextlib.contextmanager
+def _sigint_ignored():
+    """SIGINT ignored while child processes start (they inherit it), where signals can be
+    set (the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @contextlib.contextmanager
@@ -474,6 +458,7 @@ def connect(spec, field_path="", device_spec=None, report=None):
         Name of the workers' :class:`RimclPlugin`, for :func:`measure_shard`.
     """
     say = report or (lambda line: None)
+    answered = check_scheduler(spec)
     kind, value = parse_scheduler(spec)
     distributed = _import_distributed(spec)
     import dask
@@ -489,27 +474,31 @@ def connect(spec, field_path="", device_spec=None, report=None):
                     {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
                 )
             )
-            cluster = stack.enter_context(
-                distributed.LocalCluster(
-                    n_workers=value,
-                    threads_per_worker=1,
-                    processes=True,
-                    host="127.0.0.1",
-                    dashboard_address="127.0.0.1:0",
-                    # each worker holds its own copy of the field: let the OS, not a
-                    # per-worker share of the memory, decide what fits
-                    memory_limit=0,
-                    silence_logs=logging.ERROR,
+            # Ctrl-C reaches every process of the terminal's group: workers started with
+            # SIGINT ignored leave it to this process, which stops them (one line, not a
+            # traceback per worker)
+            with _sigint_ignored():
+                cluster = stack.enter_context(
+                    distributed.LocalCluster(
+                        n_workers=value,
+                        threads_per_worker=1,
+                        processes=True,
+                        host="127.0.0.1",
+                        dashboard_address="127.0.0.1:0",
+                        # each worker holds its own copy of the field: let the OS, not a
+                        # per-worker share of the memory, decide what fits
+                        memory_limit=0,
+                        silence_logs=logging.ERROR,
+                    )
                 )
-            )
             client = stack.enter_context(distributed.Client(cluster))
-            say(f"Dask: {value} local worker processes; dashboard {cluster.dashboard_link}")
+            say(f"Dask: {answered}; dashboard {cluster.dashboard_link}")
         else:
             try:
                 client = stack.enter_context(distributed.Client(value, timeout="30s"))
-            except OSError as exc:
+            except (OSError, TimeoutError) as exc:
                 raise RimclError(f"cannot reach the Dask scheduler at {value}: {exc}") from None
-            say(f"Dask: scheduler {value}; dashboard {client.dashboard_link}")
+            say(f"Dask: {answered}; dashboard {client.dashboard_link}")
         field = str(Path(field_path).resolve()) if field_path else ""
         plugin = RimclPlugin(field, device_spec or None)
         client.register_plugin(plugin)
@@ -519,7 +508,12 @@ def connect(spec, field_path="", device_spec=None, report=None):
             say(f"{len(devices)} workers: " + ", ".join(f"{n} x {d}" for d, n in kinds.items()))
         else:
             say("no worker has joined yet: the tasks wait for workers")
-        yield client, plugin.name
+        try:
+            yield client, plugin.name
+        except KeyboardInterrupt:
+            # stopping busy workers is what Ctrl-C asked for: not a warning per worker
+            logging.getLogger("distributed").setLevel(logging.ERROR)
+            raise
 
 
 def _remove_orphans(directory):
@@ -528,7 +522,9 @@ def _remove_orphans(directory):
         orphan.unlink(missing_ok=True)
 
 
-def measure_cases(study, out_dir, scheduler, *, force=False, progress=False, report=None):
+def measure_cases(
+    study, out_dir, scheduler, *, force=False, progress=False, report=None, connected=None
+):
     """Measure every case of a study on a Dask cluster into ``cases/<case>.h5``.
 
     Cases whose file exists are kept (unless ``force``); of the others, only shards
@@ -548,6 +544,9 @@ def measure_cases(study, out_dir, scheduler, *, force=False, progress=False, rep
         A progress bar of finished shards (on a terminal).
     report : callable, optional
         Called with one line of text per step.
+    connected : callable, optional
+        Called without arguments once the workers are set up, before any task (the study
+        writes its ``scene.toml`` then, not for a run that could not connect).
 
     Returns
     -------
@@ -575,6 +574,8 @@ def measure_cases(study, out_dir, scheduler, *, force=False, progress=False, rep
         else:
             todo.append(name)
     if not todo:
+        if connected is not None:
+            connected()
         return ran, skipped, seconds
     stamp = scene_stamp(study)
     for name in names:
@@ -587,6 +588,8 @@ def measure_cases(study, out_dir, scheduler, *, force=False, progress=False, rep
 
     field, device = study.field_path, study.shared.run.device
     with connect(scheduler, field, device, say) as (client, plugin):
+        if connected is not None:
+            connected()
         futures, waiting = _submit(client, plugin, study, stamp, out_dir, todo, shards)
         pending = {name: len(tasks) for name, tasks in waiting.items()}
         worker_seconds = dict.fromkeys(todo, 0.0)

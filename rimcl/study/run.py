@@ -14,6 +14,7 @@ A study directory holds:
   else is measured again, with one line saying why;
 - ``piv/<case>.h5`` with ``run.mode = "piv"`` or ``"both"``: the PIV errors of each case
   (:mod:`rimcl.piv.study`), kept on a rerun when complete and of the same scene;
+- with ``run.mode = "lpt"`` instead: ``lpt/`` and ``figures/lpt_*`` (:mod:`rimcl.lpt.study`);
 - ``shards/<case>/<first>-<stop>.h5``: with a Dask scheduler (``run.scheduler``), the
   finished shards of tracers, merged into the case files (:mod:`rimcl.study.distributed`);
 - ``stats.json`` and ``figures/``: statistics and figures of all cases (:mod:`rimcl.stats.document`,
@@ -35,6 +36,7 @@ are computed once and reused.
 import contextlib
 import dataclasses
 import json
+import os
 import re
 import shutil
 import time
@@ -42,7 +44,7 @@ from pathlib import Path
 
 from rimcl import __version__
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path
+from rimcl.core.provenance import STUDY_MARKER, atomic_path
 from rimcl.scene.config import DEFAULT_PSF_SIGMA
 from rimcl.scene.load import load_scene
 from rimcl.scene.study_config import StudyConfig
@@ -56,7 +58,7 @@ from rimcl.study.case_files import (
 from rimcl.study.summary import summary_markdown
 
 #: File that marks a directory as a rimcl study (and is locked while a study runs in it).
-MARKER = ".rimcl-study"
+MARKER = STUDY_MARKER
 #: Name of the one case of a field file that stores δn (its own refractive index).
 DELTA_N_CASE = "delta_n"
 #: Frames every study case images (positions, velocity, acceleration).
@@ -131,6 +133,25 @@ def _written_by_a_study(out_dir):
         return False
 
 
+#: The folders a study writes into and removes files from.
+STUDY_FOLDERS = ("cases", "piv", "shards", "figures")
+
+
+def _check_no_links(out_dir):
+    """Refuse a study folder (or a case's shard folder) that is a symbolic link: what the
+    study writes, replaces and removes there would land outside the study directory."""
+    folders = [out_dir / name for name in STUDY_FOLDERS]
+    shards = out_dir / "shards"
+    if shards.is_dir() and not shards.is_symlink():
+        folders += sorted(shards.iterdir())
+    for folder in folders:
+        if folder.is_symlink():
+            raise RimclError(
+                f"{folder} is a symbolic link (to {os.readlink(folder)}); a study writes only "
+                "inside its directory: make it a real folder, or use another --out"
+            )
+
+
 @contextlib.contextmanager
 def _claimed(out_dir):
     """Create (or adopt) a study directory and hold its lock while a study runs in it."""
@@ -194,8 +215,23 @@ def study_cases(study):
     from rimcl.fields.field_reader import field_kind
     from rimcl.fields.sample import sample_path
 
-    if field_kind(study.field_path or sample_path()) == "delta_n":
+    path = study.field_path or sample_path()
+    if field_kind(path) == "delta_n":
+        from rimcl.fields.cases import fluid_case
+
+        fluid_cases = [name for name in study.names if fluid_case(name)]
+        if fluid_cases:
+            raise RimclError(
+                f"{path} stores its refractive index (delta_n): it runs as is, case "
+                f"{DELTA_N_CASE}; fluid case {', '.join(fluid_cases)} does not apply "
+                f'(set cases.names = ["{DELTA_N_CASE}"])'
+            )
         return [(DELTA_N_CASE, None)]
+    if DELTA_N_CASE in study.names:
+        raise RimclError(
+            f"case {DELTA_N_CASE} runs a field file that stores its refractive index; {path} "
+            "stores a density: name its cases (C0..C4, G=<value>, dT=<K>, dS=<g/kg>)"
+        )
     return [(name, name) for name in study.names]
 
 
@@ -301,7 +337,8 @@ def run_study(
     scheduler : str, optional
         Measure the cases on Dask (``"local:N"`` or a scheduler address; default: the
         scene's ``run.scheduler``, "" = this process): see :mod:`rimcl.study.distributed`.
-        ``case_seconds`` are then worker seconds.
+        ``case_seconds`` are then worker seconds. Checked in every mode before anything
+        is written (:func:`rimcl.study.scheduler.check_scheduler`).
 
     Returns
     -------
@@ -325,9 +362,26 @@ def run_study(
     study = scene if isinstance(scene, StudyConfig) else StudyConfig.from_scene(scene)
     mode = study.run.mode
     all_cases = study_cases(study)
-    cases = all_cases if mode != "piv" else []
-    _check_resources(study)
+    cases = all_cases if mode in ("ptv", "both") else []
+    if mode != "lpt":  # the LPT stage checks its own rig and flow
+        _check_resources(study)
+    _check_no_links(out_dir)
+    if mode != "ptv":
+        from rimcl.piv.render import check_piv_scene
+        from rimcl.piv.study import configs_from_study
+
+        # bad [piv] keys, a sheet the field cannot hold: refused before anything is written
+        check_piv_scene(study.field_path or None, configs_from_study(study)[0])
+    scheduler = scheduler or study.run.scheduler
+    if scheduler:
+        from rimcl.study.distributed import check_scheduler
+
+        # every mode: a scheduler that cannot serve is refused before anything is written
+        answered = check_scheduler(scheduler)
+        if not cases:
+            say(f"Dask: {answered}, not used: PIV cases are measured in this process")
     with _claimed(out_dir):
+        _check_no_links(out_dir)  # again under the lock: nothing changes it from here on
         removed = _remove_stale_parts(out_dir)
         if removed:
             say(f"removed {removed} partial file(s) left by an interrupted run")
@@ -335,15 +389,29 @@ def run_study(
         if all_cases[0][0] == DELTA_N_CASE:
             say(f"{study.field_path} stores delta_n: one case, its own index")
         scene_file = _SceneFile(out_dir, study)
+        if mode == "lpt":
+            from rimcl.lpt.study import run_lpt_study
+
+            scene_file.settle()
+            # the LPT stage parses its own sections ([rig], [illumination], [lpt]) of the record
+            stats, ran = run_lpt_study(
+                study.scene_record(), out_dir, force=force, figures=figures, report=say
+            )
+            elapsed = time.perf_counter() - started
+            return StudyResult(out_dir, stats, ran, [], {}, True, elapsed)
         ran, skipped, seconds = [], [], {}
         todo = cases
-        scheduler = scheduler or study.run.scheduler
         if scheduler and cases:
             from rimcl.study.distributed import measure_cases
 
-            scene_file.settle()
             ran, skipped, seconds = measure_cases(
-                study, out_dir, scheduler, force=force, progress=progress, report=say
+                study,
+                out_dir,
+                scheduler,
+                force=force,
+                progress=progress,
+                report=say,
+                connected=scene_file.settle,
             )
             todo = []  # the cluster measured every case
         references = {}  # threshold -> reference images (they depend on it, not on the case)
@@ -373,7 +441,8 @@ def run_study(
             seconds[name] = time.perf_counter() - case_start
             ran.append(name)
             say(f"{step}: done in {seconds[name]:.1f} s")
-        scene_file.settle()
+        if cases:
+            scene_file.settle()  # every case file checked, or measured
         piv_files = []
         if mode != "ptv":
             from rimcl.piv.study import run_study_cases
@@ -385,8 +454,10 @@ def run_study(
                 all_cases,
                 force=force,
                 report=say,
+                before_write=scene_file.settle,
                 progress=progress,
             )
+            scene_file.settle()
             ran += [f"piv/{name}" for name in piv_ran]
             skipped += [f"piv/{name}" for name, _ in all_cases if name not in piv_ran]
         case_files = [case_path(out_dir, name) for name, _ in cases]
@@ -468,6 +539,7 @@ def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=(), 
     from rimcl.stats.figures_dt_sweep import dt_sweep_data, write_dt_sweep_figure
     from rimcl.stats.render_file import load_render
     from rimcl.stats.tables import write_json
+    from rimcl.stats.units import write_tidy
 
     config = {"scene": study.scene_record(), "study_dir": str(out_dir)}
     stats = {"cases": [], "config": config}
@@ -510,13 +582,20 @@ def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=(), 
     if piv_files:
         from rimcl.piv.figures import write_piv_figures
         from rimcl.piv.study import add_study_results
+        from rimcl.study.answer import piv_units
 
         piv_cases = add_study_results(stats, piv_files)
+        for case in stats["cases"]:
+            if "piv" in case:
+                case["piv"]["units"] = piv_units(
+                    case["piv"], study.shared.camera.length_m, study.shared.time.time_s
+                )
         bar.update()
         if figures:
             write_piv_figures(piv_cases, out_dir / "figures", config=config, overwrite=True)
         bar.update()
     write_json(out_dir / "stats.json", stats, overwrite=True)
+    write_tidy(out_dir / "stats.csv", stats)
     _write_text(out_dir / "summary.md", summary_markdown(stats, study))
     bar.update()
     bar.close()

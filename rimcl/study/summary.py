@@ -12,6 +12,7 @@ import math
 from datetime import datetime, timezone
 
 from rimcl import __version__
+from rimcl.study.answer import answer_lines, lens_lines, scene_warnings, warning_lines
 
 PAPER_SOURCE = (
     "H. Li, A. Fischer, M. Avila, D. Xu, *Measurement error of tracer-based velocimetry in "
@@ -279,8 +280,10 @@ def summary_markdown(stats, study):
     -------
     str
     """
+    lead = [*answer_lines(stats), *warning_lines(scene_warnings(stats, study)), *lens_lines(stats)]
     if study.run.mode == "piv":
-        return "\n".join([f"# rimcl study: {len(stats['cases'])} cases, PIV", *piv_lines(stats)])
+        title = f"# rimcl study: {len(stats['cases'])} cases, PIV"
+        return "\n".join([title, "", *lead, *piv_lines(stats)])
     cases = stats["cases"]
     first = cases[0]
     camera, renderer = study.shared.camera, study.shared.renderer
@@ -302,8 +305,10 @@ def summary_markdown(stats, study):
         f"across the field of view (pixel = {first['pixel_size_over_L']:.3g} L), "
         f"L = {first['length_L']:.4g}, Δt = {first['dt']:.3g}.",
         f"Device: {devices}. Configuration: `scene.toml`; every number and the software "
-        "versions: `stats.json`; figures with their data: `figures/`.",
+        "versions: `stats.json` (one row per statistic: `stats.csv`); figures with their "
+        "data: `figures/`.",
         "",
+        *lead,
         "## Headline: statistics that converge",
         "",
         "Errors from refraction only: position `ε_x = x' − x^ref`, velocity "

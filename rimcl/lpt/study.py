@@ -1,0 +1,81 @@
+"""``rimcl study`` with ``run.mode = "lpt"``: the LPT chain over the scene's cases.
+
+The study directory receives ``lpt/`` (``lpt_stats.json`` and the case files of
+:func:`rimcl.lpt.run.run_lpt`), ``figures/lpt_*.png`` (:mod:`rimcl.lpt.figures`),
+``stats.json`` (``{"config": …, "cases": [], "lpt": <lpt_stats.json>}``) and
+``summary.md`` (:func:`rimcl.lpt.run.summary_lines`). A rerun of the same scene keeps the
+finished results unless forced.
+"""
+
+import json
+from pathlib import Path
+
+from rimcl.core.provenance import to_json
+from rimcl.lpt.config import lpt_scene_from_study
+from rimcl.lpt.run import run_lpt, summary_lines
+from rimcl.stats.tables import write_json
+
+LPT_DIR = "lpt"
+
+
+def _finished(path, scene):
+    """The earlier ``lpt_stats.json`` of this same scene, or None."""
+    try:
+        previous = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+    return previous if previous.get("study_scene") == json.loads(to_json(scene)) else None
+
+
+def run_lpt_study(scene, out_dir, *, force=False, figures=True, report=None):
+    """Run the LPT chain of a study scene into ``out_dir``.
+
+    Parameters
+    ----------
+    scene : dict
+        A complete, checked scene (:func:`rimcl.scene.load.load_scene`).
+    out_dir : Path
+    force : bool
+        Redo it even if a finished run of the same scene is there.
+    figures : bool
+    report : callable, optional
+        One line of text per step.
+
+    Returns
+    -------
+    stats : dict
+        The study's ``stats.json`` document.
+    ran : list of str
+        ``["lpt/<case>", …]`` measured in this call (empty when kept).
+    """
+    say = report or (lambda line: None)
+    lpt_scene = lpt_scene_from_study(scene)
+    folder = Path(out_dir) / LPT_DIR
+    document = None if force else _finished(folder / "lpt_stats.json", scene)
+    ran = []
+    if document is None:
+        say(f"lpt: cases {', '.join(scene['cases']['names'])}")
+
+        def progress(case, frame, frames):
+            if frame == frames:
+                say(f"lpt {case}: {frames} frames done")
+
+        document = run_lpt(
+            lpt_scene,
+            folder,
+            device=scene["run"]["device"] or None,
+            progress=progress,
+            overwrite=True,
+        )
+        ran = [f"lpt/{case}" for case in document["cases"]]
+    else:
+        say(f"lpt: finished earlier, kept ({folder / 'lpt_stats.json'})")
+    if figures:
+        from rimcl.lpt.figures import write_lpt_figures
+
+        write_lpt_figures(document, Path(out_dir) / "figures", overwrite=True)
+    stats = {"config": {"scene": scene, "study_dir": str(out_dir)}, "cases": [], "lpt": document}
+    write_json(Path(out_dir) / "stats.json", stats, True)
+    summary = ["# LPT study", "", "```", *summary_lines(document), "```", ""]
+    (Path(out_dir) / "summary.md").write_text("\n".join(summary), encoding="utf-8")
+    return stats, ran

@@ -1,0 +1,420 @@
+"""Kernel shapes of the trace kernels, measured per device (DESIGN §11).
+
+A :class:`KernelShape` says how ``cl/trace.cl`` and ``cl/fan.cl`` are built and launched:
+rays per work-item (vector lanes), the PoCL switch and the work-group size. Every shape
+traces the same bits (the lanes of a work-item are independent and do the same operations
+in the same order; tests compare them bit for bit), so the choice is one of speed only,
+and which is fastest depends on the machine: the vector width and gathers of the CPU, the
+driver's compiler, a GPU's warps.
+
+So on first use of a device :func:`default_kernel_shape` times the shapes that matter
+(:func:`tune`: trilinear ``f32c``, the default trace, on a small seeded field) and keeps
+the fastest, with its measurements, in the user's cache directory, one entry per device
+name, driver version and CPU model. ``rimcl bench --tune`` measures again;
+``rimcl devices`` shows the shape in use. Environment:
+
+- ``RIMCL_TUNE``: ``auto`` (default: tune once per device, then use the cache),
+  ``cache`` (use the cache, never tune: the rule-based shape where there is no entry),
+  ``off`` (the rule-based shape; the test suite sets it).
+- ``RIMCL_SHAPE_CACHE``: the cache file (default ``kernel_shapes.json`` in
+  ``platformdirs.user_cache_dir("rimcl")``).
+"""
+
+import dataclasses
+import datetime
+import json
+import logging
+import math
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rimcl.core.errors import RimclError
+
+logger = logging.getLogger(__name__)
+
+#: Rays per work-item on CPUs: 8 lanes (float8: one AVX register in f32/f32c).
+CPU_LANES = 8
+#: Rays per work-item on PoCL for trilinear float states: 16 lanes, whose field sampler
+#: works on all lanes at once (cl/rimcl_field.h; 14-25 % faster than 8 lanes in runs of
+#: benchmarks/speed.py on the 2-core AMD EPYC, the same bits).
+POCL_FLOAT_LANES = 16
+#: Bumped when the kernels change so much that measured shapes must be measured again.
+TUNE_VERSION = 1
+#: Work-group sizes tried on GPUs (None: the driver's choice).
+GPU_GROUPS = (None, 32, 64, 128, 256)
+#: Work-group sizes tried on CPUs with the fastest lanes and switch.
+CPU_GROUPS = (None, 4, 16, 64)
+#: ``RIMCL_TUNE`` values.
+TUNE_MODES = ("auto", "cache", "off")
+
+
+@dataclasses.dataclass(frozen=True)
+class KernelShape:
+    """How the trace kernels are built and launched on a device (DESIGN §11).
+
+    Attributes
+    ----------
+    lanes : int
+        Rays advanced together by one work-item, in vector lanes (1, 2, 4, 8 or 16).
+    pocl_fast : bool
+        Force helpers inline and keep OpenCL library calls out of the hot loop (PoCL).
+    group : int or None
+        Work-items per work-group; None: the driver's choice (``trace_rays``) or the fan
+        kernel's fixed ``FAN_GROUP``.
+    """
+
+    lanes: int = 1
+    pocl_fast: bool = False
+    group: int | None = None
+
+    def __post_init__(self):
+        if self.lanes not in (1, 2, 4, 8, 16):
+            raise RimclError(f"rays per work-item must be 1, 2, 4, 8 or 16, got {self.lanes}")
+        if self.group is not None and not (isinstance(self.group, int) and self.group > 0):
+            raise RimclError(f"the work-group size must be a positive integer, got {self.group}")
+
+    def describe(self):
+        """Plain data, for output files and ``rimcl devices``."""
+        return dataclasses.asdict(self)
+
+
+def rule_shape(device, precision="f32c", interp="trilinear"):
+    """The shape without measurements: on CPUs 8 lanes, 16 on PoCL for a trilinear float
+    state, and the PoCL switch; one ray per work-item elsewhere (GPUs)."""
+    import pyopencl as cl
+
+    from rimcl.core.device import is_pocl
+
+    if device.type & cl.device_type.CPU:
+        pocl = is_pocl(device)
+        wide = pocl and _tuned_class(precision, interp)
+        return KernelShape(lanes=POCL_FLOAT_LANES if wide else CPU_LANES, pocl_fast=pocl)
+    return KernelShape(lanes=1, pocl_fast=False)
+
+
+def _tuned_class(precision, interp):
+    """Settings that take the measured shape whole: the 16-lane field sampler is for
+    trilinear float states; f64, texture and bspline3 take at most CPU_LANES lanes."""
+    return interp == "trilinear" and precision != "f64"
+
+
+def default_kernel_shape(device, precision="f32c", interp="trilinear"):
+    """The kernel shape for ``device``: the measured one (tuned on first use, see the
+    module), else :func:`rule_shape`.
+
+    Parameters
+    ----------
+    device : pyopencl.Device
+    precision : str
+        A key of :data:`rimcl.optics.trace.PRECISIONS`.
+    interp : str
+        A key of :data:`rimcl.optics.trace.INTERPOLATIONS`.
+
+    Returns
+    -------
+    KernelShape
+    """
+    entry = tuned_entry(device)
+    if entry is None:
+        return rule_shape(device, precision, interp)
+    shape = KernelShape(**entry["shape"])
+    if not _tuned_class(precision, interp):
+        shape = dataclasses.replace(shape, lanes=min(shape.lanes, CPU_LANES))
+    return shape
+
+
+def tune_mode():
+    """``RIMCL_TUNE`` (default ``auto``)."""
+    mode = os.environ.get("RIMCL_TUNE", "auto").strip().lower() or "auto"
+    if mode not in TUNE_MODES:
+        raise RimclError(f"RIMCL_TUNE must be one of {', '.join(TUNE_MODES)}, got {mode!r}")
+    return mode
+
+
+def cache_path():
+    """The shape cache file (``RIMCL_SHAPE_CACHE``, else the user's cache directory)."""
+    explicit = os.environ.get("RIMCL_SHAPE_CACHE")
+    if explicit:
+        return Path(explicit)
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("rimcl")) / "kernel_shapes.json"
+
+
+def cpu_model():
+    """The host CPU's model name (``/proc/cpuinfo``; elsewhere what Python reports)."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as info:
+            for line in info:
+                if line.lower().startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def device_key(device):
+    """What a measured shape belongs to: device name, driver version and CPU model."""
+    return " | ".join(
+        (device.name.strip(), device.driver_version.strip(), cpu_model(), f"v{TUNE_VERSION}")
+    )
+
+
+def _read_cache(path):
+    try:
+        with open(path, encoding="utf-8") as handle:
+            data = json.load(handle)
+    except FileNotFoundError:
+        return {}
+    except (OSError, ValueError) as exc:
+        logger.warning("ignoring the unreadable kernel-shape cache %s (%s)", path, exc)
+        return {}
+    entries = data.get("entries") if isinstance(data, dict) else None
+    return entries if isinstance(entries, dict) else {}
+
+
+def _write_cache(path, key, entry):
+    """Add ``entry`` under ``key``, keeping the other devices' entries; atomic."""
+    from rimcl.core.provenance import atomic_path, to_json
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    entries = _read_cache(path)
+    entries[key] = entry
+    with atomic_path(path) as tmp:
+        tmp.write_text(to_json({"format": "rimcl kernel shapes", "entries": entries}))
+
+
+_memo = {}
+
+
+def tuned_entry(device):
+    """The cache entry of ``device`` (tuning it first in mode ``auto``), or None.
+
+    Returns
+    -------
+    dict or None
+        ``shape`` (:meth:`KernelShape.describe`), ``measurements`` and provenance.
+    """
+    mode = tune_mode()
+    if mode == "off":
+        return None
+    path, key = cache_path(), device_key(device)
+    if (path, key) in _memo:
+        return _memo[(path, key)]
+    entry = _read_cache(path).get(key)
+    if entry is not None and not _valid_entry(entry):
+        logger.warning("ignoring a malformed kernel-shape entry for %s in %s", key, path)
+        entry = None
+    if entry is None and mode == "auto":
+        logger.info("measuring the kernel shapes of %s once (cached in %s)", key, path)
+        entry = tune(device, path=path)
+    _memo[(path, key)] = entry
+    return entry
+
+
+def shape_in_use(device):
+    """The shape ``device`` traces with now, and where it comes from, without tuning.
+
+    Returns
+    -------
+    dict
+        :meth:`KernelShape.describe` of the default trace's shape, plus ``source``:
+        ``measured`` (with ``measured``, the time, and ``ray_steps_per_s``), ``rule``
+        (``RIMCL_TUNE=off``, or not yet measured: it is on first use in mode ``auto``).
+    """
+    mode = tune_mode()
+    entry = None
+    if mode != "off":
+        entry = _read_cache(cache_path()).get(device_key(device))
+        entry = entry if entry is not None and _valid_entry(entry) else None
+    if entry is None:
+        return {**rule_shape(device).describe(), "source": "rule", "mode": mode}
+    rates = [m.get("ray_steps_per_s") for m in entry.get("measurements", [])]
+    rates = [rate for rate in rates if isinstance(rate, (int, float))]
+    return {
+        **KernelShape(**entry["shape"]).describe(),
+        "source": "measured",
+        "mode": mode,
+        "measured": entry.get("measured"),
+        "ray_steps_per_s": max(rates) if rates else None,
+    }
+
+
+def describe_shape(shape):
+    """One line for tables: ``16 lanes, PoCL switch, group 64``."""
+    parts = [f"{shape['lanes']} lane{'s' if shape['lanes'] > 1 else ''}"]
+    if shape["pocl_fast"]:
+        parts.append("PoCL switch")
+    parts.append(f"group {shape['group']}" if shape["group"] else "group auto")
+    return ", ".join(parts)
+
+
+def _valid_entry(entry):
+    try:
+        KernelShape(**entry["shape"])
+    except (KeyError, TypeError, RimclError):
+        return False
+    return True
+
+
+def candidate_shapes(device):
+    """The shapes :func:`tune` times first (work-group sizes come after, for the best).
+
+    CPUs: 1, 8 and 16 lanes, with and without the PoCL switch on PoCL; GPUs: one ray
+    per work-item.
+    """
+    import pyopencl as cl
+
+    from rimcl.core.device import is_pocl
+
+    if not device.type & cl.device_type.CPU:
+        return [KernelShape(1, False)]
+    switches = (False, True) if is_pocl(device) else (False,)
+    return [
+        KernelShape(lanes, fast) for lanes in (1, CPU_LANES, POCL_FLOAT_LANES) for fast in switches
+    ]
+
+
+def _tuning_field(nodes):
+    """A seeded smooth random field of ``nodes³`` (Δn as air, clamped), like speed.py's."""
+    from rimcl.fields.field import Field
+    from rimcl.optics.bench import synthetic_density
+
+    density = synthetic_density(nodes, seed=3)
+    k_rho = 2.82e-4
+    return Field.from_arrays(
+        k_rho * (density - density.mean()),
+        spacing=(1 / (nodes - 1),) * 3,
+        n_ref=1.0 + k_rho * density.mean(),
+        boundary="clamp",
+    )
+
+
+def tune(
+    device, *, path=None, nodes=32, rays=16384, repeats=3, shapes=None, groups=None, write=True
+):
+    """Time the kernel shapes on ``device`` and keep the fastest (see the module).
+
+    Each candidate traces the same rays through a small field (trilinear ``f32c``, fixed
+    step), warm, in interleaved rounds; its time is the best of ``repeats`` kernel runs.
+    A shape whose results differ in any bit from the first one's is left out (a driver
+    bug; it is logged). Then the work-group sizes are timed for the fastest shape.
+
+    Parameters
+    ----------
+    device : pyopencl.Device
+    path : Path, optional
+        Cache file; default :func:`cache_path`.
+    nodes : int
+        Grid nodes per axis of the field (about ``2 nodes`` steps per ray).
+    rays : int
+    repeats : int
+    shapes : list of KernelShape, optional
+        Default :func:`candidate_shapes`.
+    groups : sequence of int, optional
+        Work-group sizes tried with the fastest shape; default :data:`CPU_GROUPS` or
+        :data:`GPU_GROUPS` (each is another kernel build on PoCL).
+    write : bool
+        Store the result in the cache.
+
+    Returns
+    -------
+    dict
+        ``shape``, ``measurements`` (per shape: ray-steps/s, seconds of each run),
+        ``device``, ``cpu``, ``workload``, ``measured`` (UTC time) and ``seconds``.
+    """
+    import pyopencl as cl
+
+    from rimcl.core.device import describe_device
+    from rimcl.optics.rays import fan_rays, scene_for
+    from rimcl.optics.trace import _validate_rays, plan_steps, run_trace
+
+    started = time.perf_counter()
+    field = _tuning_field(int(nodes))
+    scene = scene_for(field)
+    fan = max(1, round(math.sqrt(rays / 16)))
+    origins, directions, _ = fan_rays(scene, 16, fan, seed=0)
+    origins, directions = _validate_rays(origins, directions)
+    plan = plan_steps(field, None, scene.x_end, origins)
+
+    def trace(shape):
+        return run_trace(
+            field,
+            origins,
+            directions,
+            x_end=scene.x_end,
+            plan=plan,
+            interp="trilinear",
+            precision="f32c",
+            device=device,
+            kernel_shape=shape,
+        )
+
+    def time_shapes(shapes, first):
+        seconds = {shape: [] for shape in shapes}
+        steps = None
+        for shape in shapes:  # build and warm up; check the bits
+            result = trace(shape)
+            same = all(
+                np.array_equal(getattr(result, name), getattr(first, name), equal_nan=True)
+                for name in ("end_pos", "end_dir", "path_length", "n_metric", "status")
+            )
+            if not same:
+                logger.warning("kernel shape %s traces other bits on %s: left out", shape, key)
+                del seconds[shape]
+            steps = int(result.config["sharma_steps"])
+        for _ in range(repeats):
+            for shape in seconds:
+                seconds[shape].append(trace(shape).config["kernel_seconds"])
+        return seconds, steps
+
+    key = device_key(device)
+    candidates = candidate_shapes(device) if shapes is None else list(shapes)
+    first = trace(candidates[0])
+    seconds, steps = time_shapes(candidates, first)
+    best = min(seconds, key=lambda shape: min(seconds[shape]))
+    if groups is None:
+        groups = CPU_GROUPS if device.type & cl.device_type.CPU else GPU_GROUPS
+    largest = int(device.max_work_group_size)
+    more = [
+        dataclasses.replace(best, group=group)
+        for group in groups
+        if group is not None and group <= largest
+    ]
+    if more:  # the best shape again beside its work-group sizes, under the same load
+        for shape, runs in time_shapes([best, *more], first)[0].items():
+            seconds.setdefault(shape, []).extend(runs)
+    best = min(seconds, key=lambda shape: min(seconds[shape]))
+    measurements = [
+        {
+            **shape.describe(),
+            "ray_steps_per_s": steps / min(runs),
+            "kernel_seconds": runs,
+        }
+        for shape, runs in seconds.items()
+    ]
+    entry = {
+        "shape": best.describe(),
+        "measurements": measurements,
+        "device": describe_device(device),
+        "cpu": cpu_model(),
+        "workload": {
+            "field_nodes": int(nodes),
+            "rays": len(origins),
+            "sharma_steps": steps,
+            "interp": "trilinear",
+            "precision": "f32c",
+            "repeats": int(repeats),
+        },
+        "measured": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "seconds": time.perf_counter() - started,
+    }
+    if write:
+        path = cache_path() if path is None else Path(path)
+        _write_cache(path, key, entry)
+        _memo[(path, key)] = entry
+    return entry

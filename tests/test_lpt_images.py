@@ -1,0 +1,170 @@
+"""LPT camera images: rendered, digitised and located tracers against closed forms, Mie
+weights per camera against miepython at each camera's scattering angle."""
+
+import miepython
+import numpy as np
+import pytest
+from scipy.ndimage import label
+from scipy.special import ndtr
+
+from rimcl.fields.field import Field
+from rimcl.imaging.mie import MieWeights
+from rimcl.imaging.sensor import Sensor
+from rimcl.lpt.config import RigConfig
+from rimcl.lpt.flow import Volume
+from rimcl.lpt.images import (
+    camera_imaging,
+    locate_view,
+    new_canvas,
+    ray_light,
+    rig_exposure,
+)
+from rimcl.lpt.run import rig_cameras
+from rimcl.lpt.views import Tracer, uniform_field, view
+
+N0 = 1.333
+LENGTH_M = 0.1
+ANGLES = (-30.0, -10.0, 10.0, 30.0)
+
+
+def _volume():
+    return Volume(
+        lo=np.zeros(3),
+        hi=np.ones(3),
+        x_end=1.0,
+        seed_lo=np.array([0.35, 0.1, 0.25]),
+        seed_hi=np.array([0.65, 0.9, 0.75]),
+        periodic=False,
+    )
+
+
+def _uniform():
+    base = Field.from_arrays(np.zeros((2, 2, 2), np.float32), spacing=[1.0, 1.0, 1.0], n_ref=N0)
+    return uniform_field(base)
+
+
+def _cameras():
+    return rig_cameras(RigConfig(), _volume(), LENGTH_M, N0)
+
+
+def _centre():
+    volume = _volume()
+    return 0.5 * (volume.seed_lo + volume.seed_hi)
+
+
+def test_located_centroid_and_frame_equal_the_closed_form():
+    """Noiseless 16-bit camera, one ray per tracer: the image is scale × the pixel integrals
+    of a Gaussian of the camera's σ, rounded; the centroid is the excess-weighted mean over
+    the pixels above threshold. The frame (the TIFF's content) holds the same counts."""
+    cameras = _cameras()
+    camera = cameras[1]
+    field = _uniform()
+    points = _centre() + np.array([[0, 0, 0], [0.02, 0.13, -0.07], [-0.05, -0.21, 0.11]])
+    sensor = Sensor(bit_depth=16)
+    seen = [view(field, c, points, 1, Tracer()) for c in cameras]
+    exposure = rig_exposure(cameras, seen, None, sensor, 0.5, 0.05)
+    imaging = camera_imaging(camera, 1, exposure, sensor)
+    canvas = new_canvas(camera, sensor)
+    found = locate_view(imaging, seen[1], ray_light(seen[1]), exposure.scale, (1, 0, 1), canvas)
+    sigma = camera.psf_sigma_px
+    threshold = exposure.thresholds[1]
+    # the median tracer (all tracers alike, Mie off) peaks at half full scale when centred
+    assert exposure.scale * exposure.unit_peaks[1] == pytest.approx(0.5 * 65535)
+    assert threshold == pytest.approx(0.05 * 0.5 * 65535)
+    for point, located in zip(seen[1].images[:, 0], found.centroid, strict=True):
+        cols = np.arange(int(point[0]) - 8, int(point[0]) + 9)
+        rows = np.arange(int(point[1]) - 8, int(point[1]) + 9)
+        share_c = ndtr((cols + 0.5 - point[0]) / sigma) - ndtr((cols - 0.5 - point[0]) / sigma)
+        share_r = ndtr((rows + 0.5 - point[1]) / sigma) - ndtr((rows - 0.5 - point[1]) / sigma)
+        counts = np.clip(np.rint(exposure.scale * np.outer(share_r, share_c)), 0, 65535)
+        above = counts > threshold
+        assert label(above, structure=np.ones((3, 3)))[1] == 1
+        excess = np.where(above, counts - threshold, 0.0)
+        expected = [
+            np.sum(excess * cols[None, :]) / excess.sum(),
+            np.sum(excess * rows[:, None]) / excess.sum(),
+        ]
+        np.testing.assert_allclose(located, expected, rtol=0, atol=1e-9)
+        # pixel locking of the small (σ ≈ 0.6 px) image: the located point is off the ray's
+        np.testing.assert_array_less(np.abs(located - point), 0.25)
+        frame = canvas.counts[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
+        np.testing.assert_array_equal(frame, counts.astype(np.uint16))
+    np.testing.assert_allclose(found.optics, seen[1].images[:, 0], rtol=0, atol=1e-12)
+    assert np.all(found.flags == 0)
+
+
+def test_mie_weight_per_camera_is_its_scattering_angle():
+    """Light along x2; a camera at angle θ from x1 (in air) sees a tracer at the look-at point
+    along the fluid direction (cos θ_f, sin θ_f, 0), n0 sin θ_f = sin θ: the scattering
+    cosine is sin θ / n0. Each camera's light is miepython's intensity there."""
+    cameras = _cameras()
+    mie = MieWeights(10.0, 1.59, N0, 532.0, (0.0, 1.0, 0.0), "unpolarised")
+    field = _uniform()
+    seen = [view(field, c, _centre()[None], 1, Tracer()) for c in cameras]
+    cosines = np.sin(np.radians(ANGLES)) / N0
+    parallel, perpendicular = miepython.intensities(
+        1.59, 10.0, 0.532, cosines, n_env=N0, norm="wiscombe"
+    )
+    expected = 0.5 * (parallel + perpendicular)
+    light = np.array([ray_light(s, mie)[0, 0] for s in seen])
+    np.testing.assert_allclose(light, expected, rtol=1e-6)
+    assert len(set(np.round(light / light.max(), 3))) == 4  # the four cameras differ
+    sensor = Sensor(bit_depth=16)
+    exposure = rig_exposure(cameras, seen, mie, sensor, 0.5, 0.05)
+    np.testing.assert_allclose(exposure.median_light, expected, rtol=1e-6)
+    # one gain for the rig: the brightest camera's tracer at half scale, the others dimmer;
+    # each threshold 5 % of its own camera's tracer peak
+    peaks = np.array(exposure.median_light) * np.array(exposure.unit_peaks) * exposure.scale
+    assert peaks.max() == pytest.approx(0.5 * 65535)
+    np.testing.assert_allclose(exposure.thresholds, 0.05 * peaks)
+
+
+def test_noise_draws_differ_between_cameras_and_passes():
+    cameras = _cameras()
+    field = _uniform()
+    point = _centre()[None]
+    sensor = Sensor(bit_depth=16, noise=True, read_noise_e=20.0, background_e=50.0)
+    seen = [view(field, c, point, 1, Tracer()) for c in cameras]
+    exposure = rig_exposure(cameras, seen, None, sensor, 0.5, 0.05)
+    located = {}
+    for key in ((0, 0, 0), (1, 0, 0), (0, 0, 1), (0, 1, 0)):
+        imaging = camera_imaging(cameras[0], 0, exposure, sensor)
+        found = locate_view(imaging, seen[0], ray_light(seen[0]), exposure.scale, key)
+        located[key] = found.centroid[0]
+    again = locate_view(
+        camera_imaging(cameras[0], 0, exposure, sensor),
+        seen[0],
+        ray_light(seen[0]),
+        exposure.scale,
+        (0, 0, 0),
+    ).centroid[0]
+    np.testing.assert_array_equal(again, located[(0, 0, 0)])  # reproducible
+    values = np.array(list(located.values()))
+    assert len({tuple(v) for v in values}) == 4  # independent draws
+    # shot noise on ~1e4 electrons moves the centroid by a few hundredths of a pixel
+    assert np.max(np.abs(values - seen[0].images[0, 0])) < 0.3
+
+
+def test_ray_count_choice_stops_at_the_first_converged_count():
+    """Tracers 12 mm off the focus plane through the uniform fluid: the mirrored pupil
+    spiral keeps the rays' mean image point within 0.004 px of the chief ray's (the window
+    at 30° makes the blur disc slightly lopsided), so the optics centroid converges at one
+    ray; the located centroid changes as the blur disc fills with rays: more are needed."""
+    from rimcl.lpt.views import choose_ray_count
+
+    cameras = _cameras()
+    field = _uniform()
+    points = _centre() + np.array([[0.12, 0.1, 0.05], [-0.12, -0.2, 0.0]])  # ±12 mm deep
+    choice = choose_ray_count(field, cameras[0], points, Tracer(), 0.01, 64)
+    assert choice["rays"] == 1 and choice["converged"] and len(choice["changes_px"]) == 1
+    sensor = Sensor(bit_depth=16)
+    seen = [view(field, c, points, 1, Tracer()) for c in cameras]
+    exposure = rig_exposure(cameras, seen, None, sensor, 0.5, 0.05)
+    imaging = camera_imaging(cameras[0], 0, exposure, sensor)
+
+    def located(v):
+        return locate_view(imaging, v, ray_light(v), exposure.scale, (1, 0, 0)).centroid
+
+    choice = choose_ray_count(field, cameras[0], points, Tracer(), 0.01, 64, centroid=located)
+    assert choice["rays"] > 1 and choice["changes_px"][0] > 0.01
+    assert len(choice["changes_px"]) == choice["counts"].index(choice["rays"]) + 1

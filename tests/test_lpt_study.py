@@ -1,0 +1,90 @@
+"""``rimcl study`` with run.mode = "lpt": the scene table lists the LPT sections, the study
+runs the LPT chain, writes its statistics, figures and summary, and keeps them on a rerun."""
+
+import dataclasses
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from rimcl.cli.main import cli
+from rimcl.core.errors import RimclError
+from rimcl.lpt.config import IlluminationConfig, LptSettings, RigConfig, lpt_scene_from_study
+from rimcl.lpt.figures import FIGURE_NAMES
+from rimcl.scene.keys import SCENE_KEYS
+from rimcl.scene.load import default_scene_text, load_scene
+
+
+@pytest.fixture(scope="module")
+def flow(tmp_path_factory):
+    from rimcl.fields.synth import synthesize, write_synth
+
+    result = synthesize(grid=16, seed=2, frames=5, frame_dt=0.04, t_start=0.5)
+    return write_synth(result, tmp_path_factory.mktemp("flow") / "flow16.h5")
+
+
+def test_scene_table_lists_the_lpt_keys_with_the_stage_defaults():
+    text = default_scene_text()
+    for section in ("[rig]", "[illumination]", "[lpt]"):
+        assert section in text
+    configs = {"rig": RigConfig(), "illumination": IlluminationConfig(), "lpt": LptSettings()}
+    listed = {(k.section, k.name) for k in SCENE_KEYS if k.section in configs}
+    for section, config in configs.items():
+        fields = {f.name for f in dataclasses.fields(config)}
+        assert {name for s, name in listed if s == section} == fields
+        for key in (k for k in SCENE_KEYS if k.section == section):
+            default = getattr(config, key.name)
+            if key.default is not None and key.name != "cameras":
+                expected = list(default) if isinstance(default, tuple) else default
+                assert key.default == expected, key.dotted
+    scene = lpt_scene_from_study(load_scene())
+    assert scene.rig == RigConfig() and scene.lpt == LptSettings()
+    assert scene.illumination == IlluminationConfig()
+
+
+def test_unknown_and_bad_lpt_keys_are_refused(tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text("[lpt]\nself_calibraton = true\n")
+    with pytest.raises(RimclError, match="did you mean 'self_calibration'"):
+        load_scene(path)
+    path.write_text('[run]\nmode = "lpt"\n[rig]\npreset = "stero"\n')
+    with pytest.raises(RimclError, match=r"rig\.preset"):
+        load_scene(path)
+    path.write_text("[illumination]\nextent = [0.5, true]\n")
+    with pytest.raises(RimclError, match=r"illumination\.extent"):
+        load_scene(path)
+    path.write_text('[rig]\ncameras = [{ name = "a" }]\n')
+    with pytest.raises(RimclError, match="needs position_mm"):
+        lpt_scene_from_study(load_scene(path))
+
+
+def test_study_runs_lpt(tmp_path, flow):
+    scene = tmp_path / "scene.toml"
+    scene.write_text(
+        f'[field]\npath = "{flow}"\n[cases]\nnames = ["C1", "C3"]\n[tracers]\ncount = 20\n'
+        '[time]\nframes = 5\n[run]\nmode = "lpt"\n'
+        "[lpt]\ncalibration_grid = [6, 5]\nmax_rays = 4\nself_calibration_cells = [1, 2, 2]\n"
+        "[illumination]\nextent = [0.5, 0.5]\n"
+        '[rig]\npreset = "stereo"\n'
+    )
+    out = tmp_path / "study"
+    result = CliRunner().invoke(cli, ["study", str(scene), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "C3: n_ref" in result.output
+    stats = json.loads((out / "stats.json").read_text())
+    cases = stats["lpt"]["cases"]
+    assert set(cases) == {"C1", "C3"}
+    # a stronger case refracts more: its position error grows with G
+    for axis in ("x1", "x2", "x3"):
+        c1, c3 = (cases[c]["position"][axis]["refraction"]["rms"] for c in ("C1", "C3"))
+        assert c3 > 5 * c1
+    assert cases["C3"]["abscissa"]["name"] == "G"
+    assert cases["C3"]["self_calibration"]["cells_used"] >= 1
+    for name in FIGURE_NAMES:
+        for extension in ("png", "pdf", "json"):
+            assert (out / "figures" / f"{name}.{extension}").is_file()
+    assert "LPT study" in (out / "summary.md").read_text()
+    assert (out / "lpt" / "lpt_case_C3.h5").is_file()
+    again = CliRunner().invoke(cli, ["study", str(scene), "--out", str(out)])
+    assert again.exit_code == 0, again.output
+    assert "finished earlier, kept" in again.output

@@ -1,0 +1,201 @@
+"""Physical units end to end: scales, the study's units blocks, stats.csv and summary.md."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from rimcl.core.errors import RimclError
+from rimcl.scene.load import load_scene
+from rimcl.stats.units import scales
+from rimcl.study.answer import piv_units
+from rimcl.study.run import run_study
+
+LENGTH_M, TIME_S = 0.0106, 0.45
+TINY = {
+    "cases.names": ["C3"],
+    "tracers.count": 8,
+    "camera.fan": 4,
+    "piv.pixels": 64,
+    "piv.rays": 4,
+    "piv.window": 16,
+    "run.mode": "both",
+    "time.frames": 3,
+    "field.length_m": LENGTH_M,
+    "field.time_s": TIME_S,
+}
+
+
+def test_scales_are_closed_forms():
+    got = scales(length=2.0, pixel_size=0.004, dt=0.02, length_m=0.01, time_s=0.5)
+    assert got["L_mm"] == pytest.approx(20.0)
+    assert got["pixel_um"] == pytest.approx(40.0)
+    assert got["dt_ms"] == pytest.approx(10.0)
+    # a velocity error of 0.003 L0/T0 at Δt = 10 ms: 0.06 mm/s, 0.015 px per frame
+    assert 0.003 * got["mm_s_per_velocity"] == pytest.approx(0.06)
+    assert 0.003 * got["px_frame_per_velocity"] == pytest.approx(0.015)
+    assert got["m_s2_per_acceleration"] == pytest.approx(0.04)
+    bare = scales(length=2.0, pixel_size=0.004, dt=0.02)
+    assert bare["in_field_units"] and bare["mm_s_per_velocity"] is None
+    assert bare["px_per_length"] == pytest.approx(250.0)
+
+
+def test_velocity_scale_gives_time_scale_and_conflicts_are_refused():
+    scene = load_scene(None, {"field.length_m": 0.01, "field.velocity_m_s": 0.02})
+    assert scene["field"]["time_s"] == pytest.approx(0.5)
+    with pytest.raises(RimclError, match="disagree"):
+        load_scene(None, {"field.length_m": 0.01, "field.velocity_m_s": 0.02, "field.time_s": 1.0})
+    with pytest.raises(RimclError, match=r"needs field\.length_m"):
+        load_scene(None, {"field.velocity_m_s": 0.02})
+
+
+def test_piv_units_closed_form():
+    piv = {
+        "length_L": 2.0,
+        "pixel_size_over_L": 0.002,
+        "dt": 0.02,
+        "displacement_px": {"truth_rms": 1.5, "refraction_rms": 0.01},
+    }
+    block = piv_units(piv, 0.01, 0.5)
+    # 1.5 px of 4e-3 L0 in 0.02 T0: 0.3 L0/T0 = 6 mm/s at 1 cm and 0.5 s
+    assert block["truth_rms"]["field"] == pytest.approx(0.3)
+    assert block["truth_rms"]["mm_s"] == pytest.approx(6.0)
+    assert piv_units(piv, None, None)["refraction_rms"]["mm_s"] is None
+
+
+@pytest.fixture(scope="module")
+def study(device, tmp_path_factory):
+    out = tmp_path_factory.mktemp("units")
+    scene = load_scene(None, {**TINY, "run.device": device.name})
+    run_study(scene, out, figures=False)
+    return out, json.loads((out / "stats.json").read_text())
+
+
+def test_physical_values_are_normalised_values_times_the_scales(study):
+    _, stats = study
+    case = stats["cases"][0]
+    units = case["units"]
+    factors = units["scales"]
+    assert factors["length_m"] == LENGTH_M and factors["time_s"] == TIME_S
+    assert factors["dt_ms"] == pytest.approx(case["dt"] * TIME_S * 1e3)
+    pixel = case["pixel_size_over_L"] * case["length_L"]
+    assert factors["pixel_um"] == pytest.approx(pixel * LENGTH_M * 1e6)
+    median = units["position"]["median"]
+    assert median["over_L"] == case["position_error_median_over_L"]
+    assert median["um"] == pytest.approx(median["over_L"] * case["length_L"] * LENGTH_M * 1e6)
+    assert median["px"] == pytest.approx(median["over_L"] / case["pixel_size_over_L"])
+    for group, unit, factor in (
+        ("velocity", "mm_s", LENGTH_M / TIME_S * 1e3),
+        ("acceleration", "m_s2", LENGTH_M / TIME_S**2),
+    ):
+        for component in ("u3", "vector") if group == "velocity" else ("a3",):
+            for entry in units[group][component].values():
+                assert entry[unit] == pytest.approx(entry["field"] * factor)
+    u3 = units["velocity"]["u3"]
+    assert u3["rms_truth"]["px_frame"] == pytest.approx(
+        u3["rms_truth"]["field"] * case["dt"] / pixel
+    )
+    # rms(ε)/rms(u3) of the statistics is the ratio of the two rms values
+    ratio = u3["rms_refraction"]["field"] / u3["rms_truth"]["field"]
+    assert ratio == pytest.approx(case["velocity"]["u3"]["rms_normalized"], rel=1e-9)
+    piv = case["piv"]["units"]
+    px = case["piv"]["displacement_px"]["refraction_rms"]
+    piv_pixel = case["piv"]["pixel_size_over_L"] * case["piv"]["length_L"]
+    assert piv["refraction_rms"]["mm_s"] == pytest.approx(
+        px * piv_pixel / case["piv"]["dt"] * LENGTH_M / TIME_S * 1e3
+    )
+
+
+def test_tidy_table_reads_with_pandas_and_matches_stats_json(study):
+    out, stats = study
+    table = pd.read_csv(out / "stats.csv")
+    assert list(table.columns) == [
+        "case", "quantity", "component", "statistic", "value", "lo", "hi", "unit"
+    ]  # fmt: skip
+    case = stats["cases"][0]
+    row = table[(table.quantity == "velocity_error") & (table.component == "u3")
+                & (table.statistic == "rms_normalized")].iloc[0]  # fmt: skip
+    assert row.value == pytest.approx(case["velocity"]["u3"]["rms_normalized"])
+    assert [row.lo, row.hi] == pytest.approx(case["velocity"]["u3"]["ci95"]["rms_normalized"])
+
+    def value(quantity, component, statistic, unit):
+        picked = table[(table.quantity == quantity) & (table.component == component)
+                       & (table.statistic == statistic) & (table.unit == unit)]  # fmt: skip
+        assert len(picked) == 1
+        return picked.value.iloc[0]
+
+    field = value("velocity", "u3", "rms_refraction", "field")
+    mm_s = value("velocity", "u3", "rms_refraction", "mm/s")
+    assert mm_s == pytest.approx(field * LENGTH_M / TIME_S * 1e3)
+    pixel = case["pixel_size_over_L"] * case["length_L"]
+    px = value("velocity", "u3", "rms_refraction", "px/frame")
+    assert px == pytest.approx(field * case["dt"] / pixel)
+    acc = value("acceleration", "a3", "rms_total", "field")
+    assert value("acceleration", "a3", "rms_total", "m/s2") == pytest.approx(
+        acc * LENGTH_M / TIME_S**2
+    )
+    assert value("position_error", "magnitude", "median", "um") == pytest.approx(
+        case["position_error_median_over_L"] * case["length_L"] * LENGTH_M * 1e6
+    )
+    piv_px = value("piv_displacement", "refraction_rms", "rms", "px/frame")
+    piv_pixel = case["piv"]["pixel_size_over_L"] * case["piv"]["length_L"]
+    assert value("piv_displacement", "refraction_rms", "rms", "mm/s") == pytest.approx(
+        piv_px * piv_pixel / case["piv"]["dt"] * LENGTH_M / TIME_S * 1e3
+    )
+
+
+def test_summary_leads_with_the_answer_in_physical_units(study):
+    out, stats = study
+    text = (out / "summary.md").read_text()
+    answer = text.index("## Your answer")
+    assert answer < text.index("## Headline")
+    units = stats["cases"][0]["units"]
+    # the answer quotes the fitted tracks where there are any (what PTV codes report)
+    group = "velocity_fit" if units.get("velocity_fit") else "velocity"
+    total = units[group]["vector"]["rms_total"]
+    assert f"your velocity error is {total['mm_s']:.3g} mm/s" in text
+    assert f"Δt = {units['scales']['dt_ms']:.3g} ms" in text
+    median = units["position"]["median"]
+    assert f"median position error {median['um']:.3g} µm ({median['px']:.3g} px)" in text
+    piv = stats["cases"][0]["piv"]["units"]["refraction_rms"]
+    assert f"PIV: refraction error {piv['mm_s']:.3g} mm/s" in text
+    assert np.isfinite(total["mm_s"])
+
+
+def test_without_scales_outputs_say_field_units(device, tmp_path):
+    scene = load_scene(
+        None, {**TINY, "run.mode": "ptv", "field.length_m": None, "field.time_s": None,
+               "run.device": device.name},
+    )  # fmt: skip
+    run_study(scene, tmp_path, figures=False)
+    stats = json.loads((tmp_path / "stats.json").read_text())
+    units = stats["cases"][0]["units"]
+    assert (
+        units["scales"]["in_field_units"] and units["velocity"]["u3"]["rms_truth"]["mm_s"] is None
+    )
+    assert "*In field units*" in (tmp_path / "summary.md").read_text()
+
+
+def test_case_and_piv_files_open_with_xarray_as_named_dimensions_with_units(study):
+    import xarray as xr
+
+    out, stats = study
+    case_file = out / "cases" / "C3.h5"
+    tracers = xr.open_dataset(case_file, group="tracers", engine="h5netcdf")
+    assert set(tracers.coords) >= {"id", "frame", "time"}
+    assert tracers["x3_meas"].attrs["units"] == "L0"
+    assert tracers["x3_meas"].attrs["si_per_unit"] == pytest.approx(LENGTH_M)
+    grid = tracers.set_index(row=["id", "frame"]).unstack("row")
+    assert grid["x3_meas"].dims == ("id", "frame")
+    assert grid["x3_meas"].shape == (TINY["tracers.count"], TINY["time.frames"])
+    velocity = xr.open_dataset(case_file, group="velocity", engine="h5netcdf")
+    assert velocity["u3_meas"].attrs["units"] == "L0/T0"
+    assert velocity["u3_meas"].attrs["si_per_unit"] == pytest.approx(LENGTH_M / TIME_S)
+    rays = xr.open_dataset(case_file, group="rays", engine="h5netcdf")
+    assert "ray" in rays.dims
+    piv = xr.open_dataset(out / "piv" / "C3.h5", engine="h5netcdf")
+    assert piv["dx_field"].dims == ("row", "column") and piv["dx_field"].attrs["units"] == "px"
+    np.testing.assert_array_equal(piv["row"].values, piv["y"].values[:, 0])
+    # the tables' numbers are the file's columns
+    assert stats["cases"][0]["n_tracers"] == grid.sizes["id"]
