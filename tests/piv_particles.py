@@ -68,8 +68,9 @@ def particle_pair(displacement, shape=(256, 256), density=0.03, diameter=3.0, se
     height, width = shape
     area = (height + 2 * band) * (width + 2 * band)
     count = rng.poisson(density * area)
-    x = rng.uniform(-band, width + band, count)
-    y = rng.uniform(-band, height + band, count)
+    # the image spans [-0.5, width - 0.5) (pixel centres at integer coordinates)
+    x = rng.uniform(-band, width + band, count) - 0.5
+    y = rng.uniform(-band, height + band, count) - 0.5
     dx, dy = displacement(x, y)
     sigma = diameter / 4
     full = 2**bits - 1
