@@ -9,7 +9,8 @@ both engines alike). A small warm-up run builds every kernel first. Prints the w
 per frame of each engine and pair, their stage times, the same-run ratios and how many
 pixels' counts differ:
 
-    python benchmarks/piv_frames.py                       # the must-hold figure
+    python benchmarks/piv_frames.py                       # 1024² px, 256 rays, C2
+    python benchmarks/piv_frames.py --pixels 512 --case G=0   # straight rays: imaging only
     python benchmarks/piv_frames.py --pixels 256 --rays 64 --device nvidia
 
 Machines shared with other jobs drift by tens of per cent from minute to minute; only the
