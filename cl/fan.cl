@@ -32,6 +32,11 @@
  *   steps; max_steps past a path of max_length, exit_side past the lateral box box23 =
  *   (lo2, hi2, lo3, hi3), turned_back if it does not move towards the plane); its sample
  *   records are not written (the host makes them). Default 0.
+ *   RIMCL_TRACER_DEPTH: 0 (default) tracers are (x2, x3) on the sheet x1 = x_sheet (PTV);
+ *   1 tracers are (x1, x2, x3), each at its own depth across a light sheet (PIV).
+ *   RIMCL_IMAGE_PLANE: 0 (default) rays are imaged on the sheet (cameras 0, 1) or the lens's
+ *   focus plane (camera 2); 1 on each tracer's own plane x1 (rimcl.trace_rays' image_pos,
+ *   the plane and pupil cameras of PIV frames, whose depth of field covers the sheet).
  * Needs cl_khr_fp64.
  * Units: lengths in field units; image points in pixels of the camera (pixel i spans
  *   [i, i + 1) from the image origin); refractive indices as ratios (dimensionless).
@@ -40,7 +45,8 @@
  * Work-item: RIMCL_LANES consecutive slots of the batch; fan_directions: one ray.
  * Global size: ceil(n_rays / RIMCL_LANES) (extra items return); fan_directions: n_rays.
  *
- * tracers (B x 2 doubles): tracer positions (x2, x3) on the sheet.
+ * tracers (B x 2 doubles, or B x 3 with RIMCL_TRACER_DEPTH): tracer positions (x2, x3) on
+ *   the sheet, or (x1, x2, x3).
  * aims    (K x 3 doubles): the camera's aim points (x1, x2, x3) (a lens: its pupil's).
  * order   (K ints): a permutation of the aim points, the order their rays fill lanes in.
  * camera  (CAM_COUNT doubles, offsets CAM_* below; the CAM_WINDOW_* ones only for 2).
@@ -84,6 +90,27 @@
 #ifndef RIMCL_STRAIGHT
 #define RIMCL_STRAIGHT 0
 #endif
+#ifndef RIMCL_TRACER_DEPTH
+#define RIMCL_TRACER_DEPTH 0
+#endif
+#ifndef RIMCL_IMAGE_PLANE
+#define RIMCL_IMAGE_PLANE 0
+#endif
+
+/* The start point (x1, x2, x3) of tracer t's rays. */
+RIMCL_INLINE void tracer_start(__global const double *tracers, const int t, const double x_sheet,
+                               double *start)
+{
+#if RIMCL_TRACER_DEPTH
+    (void)x_sheet;
+    for (int q = 0; q < 3; ++q)
+        start[q] = tracers[3 * t + q];
+#else
+    start[0] = x_sheet;
+    start[1] = tracers[2 * t];
+    start[2] = tracers[2 * t + 1];
+#endif
+}
 
 /* (x0^2 + x1^2) + x2^2, the order of numpy.linalg.norm over a row of 3 */
 RIMCL_INLINE double norm3(double a, double b, double c)
@@ -214,6 +241,7 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
     lvec3 origin_hi, origin_lo, dir_hi, dir_lo;
     lmask valid;
     int lane_ray[RIMCL_LANES];
+    double lane_x1[RIMCL_LANES];
 #if RIMCL_STRAIGHT
     double lane_start[RIMCL_LANES][3], lane_dir[RIMCL_LANES][3];
 #endif
@@ -225,7 +253,9 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
         const int ray = tracer * rays_per_tracer + aim_index;
         lane_ray[k] = ray;
         __global const double *aim = aims + 3 * aim_index;
-        const double start[3] = {x_sheet, tracers[2 * tracer], tracers[2 * tracer + 1]};
+        double start[3];
+        tracer_start(tracers, tracer, x_sheet, start);
+        lane_x1[k] = start[0];
         double d[3];
         camera_direction(camera, start, aim, d);
 #if RIMCL_MIE
@@ -323,6 +353,9 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
         /* through the window; back-projection onto the focus plane (LensCamera.image_points) */
         through_window(camera, end, dir);
         const double focus_x1 = camera[CAM_FOCUS_X1];
+#elif RIMCL_IMAGE_PLANE == 1
+        /* back-projection to the tracer's own plane (rimcl.trace_rays' image_pos) */
+        const double focus_x1 = lane_x1[k];
 #else
         /* back-projection to the sheet (the ideal lens focused on it) */
         const double focus_x1 = x_sheet;
@@ -382,7 +415,8 @@ __kernel void fan_directions(__global const double *tracers, __global const doub
     if (ray >= n_rays)
         return;
     const int tracer = ray / rays_per_tracer;
-    const double start[3] = {camera[CAM_X_SHEET], tracers[2 * tracer], tracers[2 * tracer + 1]};
+    double start[3];
+    tracer_start(tracers, tracer, camera[CAM_X_SHEET], start);
     double d[3];
     camera_direction(camera, start, aims + 3 * (ray - tracer * rays_per_tracer), d);
     normalise3(d);

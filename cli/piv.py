@@ -12,6 +12,7 @@ from rimcl.cli.options import (
     case_option,
     command_scene,
     device_option,
+    engine_option,
     field_option,
     handle_errors,
     k_rho_option,
@@ -78,7 +79,7 @@ def piv():
 @click.option(
     "--outlier-eps",
     type=POSITIVE,
-    default=0.1,
+    default=0.2,
     show_default=True,
     help="eps of the normalized median test (px).",
 )
@@ -89,6 +90,15 @@ def piv():
     show_default=True,
     help="Threshold of the normalized median test.",
 )
+@click.option(
+    "--export",
+    "exports",
+    multiple=True,
+    type=click.Path(dir_okay=False),
+    help="Also write the vectors as .nc (xarray), .txt (OpenPIV) or .mat (PIVlab); repeatable.",
+)
+@click.option("--pixel-size-m", type=POSITIVE, default=None, help="Exports: metres per pixel.")
+@click.option("--dt-s", type=POSITIVE, default=None, help="Exports: seconds between A and B.")
 @overwrite_option
 @handle_errors
 def analyze(
@@ -101,6 +111,9 @@ def analyze(
     first_window,
     outlier_eps,
     outlier_threshold,
+    exports,
+    pixel_size_m,
+    dt_s,
     overwrite,
 ):
     """Correlate two grey TIFF frames A and B into a displacement field (HDF5).
@@ -112,7 +125,8 @@ def analyze(
     Example:
       rimcl piv analyze run_field_A.tif run_field_B.tif -o vectors.h5 --window 32 --passes 3
     """
-    from rimcl.piv.analysis import PivSettings, analyze_files
+    from rimcl.piv.analysis import PivSettings
+    from rimcl.piv.export import run_analyze
 
     settings = PivSettings(
         window=window,
@@ -122,7 +136,9 @@ def analyze(
         outlier_eps=outlier_eps,
         outlier_threshold=outlier_threshold,
     )
-    result = analyze_files(image_a, image_b, output, settings, overwrite=overwrite)
+    result = run_analyze(
+        image_a, image_b, output, settings, exports, pixel_size_m, dt_s, overwrite=overwrite
+    )
     rows, cols = result.dx.shape
     invalid = int(np.count_nonzero(~result.valid))
     click.echo(
@@ -136,7 +152,7 @@ def analyze(
         click.echo("mean displacement n/a: no window holds particle signal in both frames")
     times = ", ".join(f"{seconds:.3f}" for seconds in result.pass_seconds)
     click.echo(f"seconds per pass: {times}")
-    click.echo(f"wrote {output}")
+    click.echo("wrote " + ", ".join(str(path) for path in (output, *exports)))
 
 
 #: ``rimcl piv render`` option -> scene key it overrides (the rest are the command's own)
@@ -166,6 +182,11 @@ RENDER_SCENE_KEYS = {
     "precision": "integrator.precision",
     "device_spec": "run.device",
     "seed": "tracers.seed",
+    "noise": "sensor.noise",
+    "peak_electrons": "sensor.peak_electrons",
+    "background_e": "sensor.background_e",
+    "mie": "mie.enabled",
+    "engine": "run.engine",
 }
 
 
@@ -229,6 +250,29 @@ RENDER_SCENE_KEYS = {
 @click.option("--overlap", type=NON_NEGATIVE, help="Window overlap, fraction [piv.overlap].")
 @click.option("--passes", type=COUNT, help="Correlation passes [piv.passes].")
 @click.option(
+    "--scaling",
+    type=click.Choice(["fixed", "per_image"]),
+    default="fixed",
+    show_default=True,
+    help="fixed: one scale for all frames; per_image: each frame's brightest pixel at the peak.",
+)
+@click.option(
+    "--noise",
+    is_flag=True,
+    default=None,
+    help="Sensor noise: shot, read noise, background, well [sensor.noise].",
+)
+@click.option(
+    "--peak-electrons",
+    type=POSITIVE,
+    help="Mean e- at an in-focus particle's peak [sensor.peak_electrons].",
+)
+@click.option("--background-e", type=FINITE, help="Background, e-/px [sensor.background_e].")
+@click.option(
+    "--mie", is_flag=True, default=None, help="Weigh each ray by its Mie intensity [mie.enabled]."
+)
+@engine_option
+@click.option(
     "--interp",
     type=click.Choice(["trilinear", "texture", "bspline3"]),
     help="Interpolation of the gridded field [integrator.interp].",
@@ -252,7 +296,16 @@ RENDER_SCENE_KEYS = {
 @overwrite_option
 @handle_errors
 def render(
-    scene_file, scene_option, case, k_rho, peak_fraction, step, prefix, overwrite, **options
+    scene_file,
+    scene_option,
+    case,
+    k_rho,
+    peak_fraction,
+    scaling,
+    step,
+    prefix,
+    overwrite,
+    **options,
 ):
     """PIV frame pairs of one case from a scene (SCENE_FILE, default: the default scene),
     through the field and through a uniform medium, with the truth.
@@ -296,12 +349,20 @@ def render(
     case, k_rho = command_case(scene, case, k_rho)
     piv_config, configs = configs_from_study(StudyConfig.from_scene(scene))
     piv_config = dataclasses.replace(
-        piv_config, imaging=dataclasses.replace(piv_config.imaging, peak_fraction=peak_fraction)
+        piv_config,
+        imaging=dataclasses.replace(
+            piv_config.imaging, peak_fraction=peak_fraction, scaling=scaling
+        ),
     )
     if isinstance(parsed_step, str):
         configs["integrator"] = dataclasses.replace(configs["integrator"], step=parsed_step)
     result = run_piv_render(
-        scene["field"]["path"] or None, case=case, k_rho=k_rho, piv=piv_config, **configs
+        scene["field"]["path"] or None,
+        case=case,
+        k_rho=k_rho,
+        piv=piv_config,
+        progress=True,
+        **configs,
     )
     paths = write_piv_render(prefix, result, overwrite=overwrite)
     truth = result.reference.truth
@@ -318,3 +379,100 @@ def render(
     click.echo(f"rays through the field: {result.field.ray_counts}")
     click.echo(f"motion: {result.motion}")
     click.echo("wrote " + ", ".join(str(path) for path in paths.values()))
+
+
+@piv.command()
+@field_option
+@case_option
+@k_rho_option
+@click.option("--frames", type=click.IntRange(min=2), default=5, show_default=True)
+@click.option(
+    "--seeds",
+    default="0",
+    show_default=True,
+    help="Comma-separated seeds: one independent realisation each.",
+)
+@click.option(
+    "--pixels", type=COUNT, default=512, show_default=True, help="Pixels across the field of view."
+)
+@click.option("--density", type=POSITIVE, default=0.03, show_default=True, help="Per pixel.")
+@click.option("--fan", type=COUNT, default=8, show_default=True, help="M: M×M rays per tracer.")
+@click.option("--dt", type=POSITIVE, default=0.02, show_default=True, help="Time between frames.")
+@click.option("--start-frame", type=INDEX, default=0, show_default=True)
+@click.option("--length-m", type=POSITIVE, default=None, help="Metres per field length unit.")
+@click.option("--time-s", type=POSITIVE, default=None, help="Seconds per field time unit.")
+@click.option("--noise", is_flag=True, help="Sensor noise: shot, read noise, background, well.")
+@engine_option
+@device_option
+@click.option("-o", "--output", "prefix", default="seq", show_default=True, help="Prefix.")
+@overwrite_option
+@handle_errors
+def sequence(
+    field_path,
+    case,
+    k_rho,
+    frames,
+    seeds,
+    pixels,
+    density,
+    fan,
+    dt,
+    start_frame,
+    length_m,
+    time_s,
+    noise,
+    engine,
+    device_spec,
+    prefix,
+    overwrite,
+):
+    """Time-resolved PIV: FRAMES frames DT apart per seed, dense truth, particle tables.
+
+    Writes PREFIX_seed<s>_<k>.tif and PREFIX_seed<s>_truth.h5 per seed (truth in px per
+    frame, and in m/s with --length-m and --time-s).
+
+    \b
+    Example:
+      rimcl piv sequence --case C2 --frames 5 --seeds 0,1,2 -o c2
+    """
+    from rimcl.core.errors import RimclError
+    from rimcl.fields.field_loading import case_arguments
+    from rimcl.piv.imaging_config import PivImaging
+    from rimcl.piv.render import PivConfig
+    from rimcl.piv.sequence import (
+        check_sequence_outputs,
+        run_piv_sequence,
+        write_piv_sequence,
+    )
+    from rimcl.scene.config import CameraConfig, RunConfig, SensorConfig
+
+    try:
+        seed_list = [int(s) for s in seeds.split(",") if s.strip()]
+    except ValueError:
+        raise RimclError(f"--seeds takes comma-separated integers, got {seeds!r}") from None
+    check_sequence_outputs(prefix, seed_list, frames, overwrite)
+    case, k_rho = case_arguments(field_path, case, k_rho)
+    made = run_piv_sequence(
+        field_path,
+        case=case,
+        k_rho=k_rho,
+        piv=PivConfig(
+            imaging=PivImaging(pixels=pixels, density=density), dt=dt, start_frame=start_frame
+        ),
+        frames=frames,
+        seeds=seed_list,
+        camera=CameraConfig(kind="plane", fan=fan),
+        run=RunConfig(device=device_spec, **({} if engine is None else {"engine": engine})),
+        sensor=SensorConfig(noise=noise),
+        length_m=length_m,
+        time_s=time_s,
+        progress=True,
+    )
+    for result in made:
+        paths = write_piv_sequence(prefix, result, overwrite=overwrite)
+        rms = np.sqrt(np.mean(result.truth_px**2, axis=(0, 1, 2)))
+        click.echo(
+            f"seed {result.seed}: {result.config['n_tracers']} tracers, {frames} frames; "
+            f"dense truth rms dx {rms[0]:.3g}, dy {rms[1]:.3g} px per frame; wrote "
+            f"{paths[0].name} .. {paths[-1].name}"
+        )

@@ -16,7 +16,7 @@ def render_particles(x, y, shape, sigma, brightness=1.0):
     Parameters
     ----------
     x, y : ndarray, shape (N,)
-        Particle centres (pixels).
+        Particle centres (pixels; pixel centres at integer coordinates, as rimcl's PIV).
     shape : tuple of 2 int
         Image ``(rows, columns)``.
     sigma : float
@@ -33,9 +33,10 @@ def render_particles(x, y, shape, sigma, brightness=1.0):
     brightness = np.broadcast_to(np.asarray(brightness, dtype=np.float64), x.shape)
 
     def tables(centres):
-        first = np.floor(centres).astype(np.int64)[:, None] + offsets[None, :]
-        weights = ndtr((first + 1 - centres[:, None]) / sigma) - ndtr(
-            (first - centres[:, None]) / sigma
+        # pixel centres at integer coordinates: pixel j spans [j - 1/2, j + 1/2)
+        first = np.floor(centres + 0.5).astype(np.int64)[:, None] + offsets[None, :]
+        weights = ndtr((first + 0.5 - centres[:, None]) / sigma) - ndtr(
+            (first - 0.5 - centres[:, None]) / sigma
         )
         return first, weights
 
@@ -67,8 +68,9 @@ def particle_pair(displacement, shape=(256, 256), density=0.03, diameter=3.0, se
     height, width = shape
     area = (height + 2 * band) * (width + 2 * band)
     count = rng.poisson(density * area)
-    x = rng.uniform(-band, width + band, count)
-    y = rng.uniform(-band, height + band, count)
+    # the image spans [-0.5, width - 0.5) (pixel centres at integer coordinates)
+    x = rng.uniform(-band, width + band, count) - 0.5
+    y = rng.uniform(-band, height + band, count) - 0.5
     dx, dy = displacement(x, y)
     sigma = diameter / 4
     full = 2**bits - 1

@@ -72,7 +72,8 @@ def test_window_grid_convention():
     assert grid.spacing == 16
     assert grid.cols.tolist() == [1, 17, 33, 49, 65, 81, 97]
     assert grid.rows.tolist() == [2, 18, 34, 50, 66]
-    assert grid.x[0] == 17.0 and grid.y[0] == 18.0
+    # pixel centres at integer coordinates: the centre of pixels 1..32 is 16.5
+    assert grid.x[0] == 16.5 and grid.y[0] == 17.5
     image = np.arange(100 * 130, dtype=float).reshape(100, 130)
     windows = grid.extract(image)
     assert windows.shape == (5, 7, 32, 32)
@@ -172,7 +173,7 @@ def test_cli_analyze_round_trip(tmp_path):
         assert "config" in h5.attrs and "versions" in h5.attrs and "settings" in h5.attrs
         assert h5["valid"].dtype == bool and h5["replaced"].dtype == bool
         assert h5["x"].shape == h5["dx"].shape == (7, 11)
-        assert h5["x"][0, 0] == 16.0 and h5["y"][0, 0] == 16.0
+        assert h5["x"][0, 0] == 15.5 and h5["y"][0, 0] == 15.5
         assert abs(np.mean(h5["dx"][()]) - 0.7) < 0.02
         assert abs(np.mean(h5["dy"][()]) + 0.3) < 0.02
     again = CliRunner().invoke(cli, args)

@@ -38,7 +38,9 @@ def test_one_particle_is_valid_only_where_its_image_is(passes):
         return np.rint(image).astype(np.uint16)
 
     settings = PivSettings(window=16, passes=passes)
-    result = _quietly(frame(30.2, 33.1), frame(31.0, 33.6), settings)
+    # pixel centres at integer coordinates (piv_particles): the particle at (29.7, 32.6)
+    # in A and (30.5, 33.1) in B
+    result = _quietly(frame(29.7, 32.6), frame(30.5, 33.1), settings)
     # the particle's peak pixel is (row 33, column 30) in A and (33, 31) in B: only the
     # windows holding both are vectors; the deformation's spline spreads light into all 49
     grid = WindowGrid.for_image((64, 64), 16, 0.5)

@@ -96,7 +96,24 @@ def lane_order(camera):
     return np.argsort(code, kind="stable").astype(np.int32)
 
 
-def _seconds(event):
+def tracer_directions(camera, positions):
+    """Initial unit directions of each tracer's rays from its own position ``(x1, x2, x3)``,
+    shape (N, K, 3): what PIV traces across a light sheet (``cl/fan.cl`` with
+    ``RIMCL_TRACER_DEPTH`` makes the same on the device).
+
+    Aimed from each tracer's own depth at the camera's aim points; a lens behind a window
+    solves its directions from the sheet (:meth:`LensCamera.directions`), which moves the
+    rays of a tracer a fraction of the sheet thickness off the pupil points it aims at:
+    the pupil test after tracing still decides which are collected.
+    """
+    if isinstance(camera, LensCamera) and camera.window is not None:
+        return camera.directions(positions[:, 1:])
+    aim = camera.aim_points()[None, :, :] - positions[:, None, :]
+    return aim / np.linalg.norm(aim, axis=-1, keepdims=True)
+
+
+def event_seconds(event):
+    """Seconds an OpenCL event ran on the device (a profiling queue's)."""
     return (event.profile.end - event.profile.start) * 1e-9
 
 
@@ -128,6 +145,172 @@ class _Batch:
     sample_rays: np.ndarray = None
 
 
+class FanStage:
+    """``cl/fan.cl`` for one camera: its aim points, lane order and camera block on the
+    device, and its kernel for a field (shared by the PTV :class:`DeviceEngine` and the PIV
+    frames of :mod:`rimcl.imaging.frame_device`).
+
+    Parameters
+    ----------
+    camera : PlaneCamera, PupilCamera or LensCamera
+    scene : rimcl.optics.camera.Scene
+    renderer : rimcl.imaging.render.Renderer
+        Image origin and pixel size of the rays' image points.
+    device : pyopencl.Device
+    mie : rimcl.imaging.mie.MieWeights, optional
+        Weigh each ray by its Mie intensity (made by the kernel from its initial direction).
+    depth : bool
+        Tracers at their own depth ``(x1, x2, x3)`` (PIV across a light sheet), imaged on
+        their own plane (plane and pupil cameras) or the lens's focus plane; else
+        ``(x2, x3)`` on the sheet (PTV).
+    """
+
+    def __init__(self, camera, scene, renderer, device, mie=None, depth=False):
+        import pyopencl as cl
+
+        from rimcl.core.device import context_for
+
+        self.camera, self.scene, self.renderer, self.device = camera, scene, renderer, device
+        self.depth = bool(depth)
+        self.rays = camera.rays_per_tracer
+        context = context_for(device)
+        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        self.aims = cl.Buffer(context, ro, hostbuf=np.ascontiguousarray(camera.aim_points()))
+        self.order = cl.Buffer(context, ro, hostbuf=lane_order(camera))
+        self.camera_block = cl.Buffer(context, ro, hostbuf=self._camera_block())
+        self.mie_mode, self.mie_table = 0, self.aims
+        if mie is not None:
+            self.mie_mode, table = mie.device_table()
+            self.mie_table = cl.Buffer(context, ro, hostbuf=table)
+            self.mie_terms = np.int32((len(table) - 6) // 4)
+        self.straight_args = None
+
+    def mie_args(self, weight_buffer):
+        """The kernel's Mie arguments, the rays' weights written to ``weight_buffer``."""
+        if not self.mie_mode:
+            return (self.aims, np.int32(0), self.aims)
+        return (self.mie_table, self.mie_terms, weight_buffer)
+
+    def _camera_kind(self):
+        """``RIMCL_CAMERA`` of ``cl/fan.cl``: 0 plane, 1 pupil (and a lens without a
+        window: its pupil, imaging onto the sheet), 2 lens behind a window."""
+        camera = self.camera
+        if isinstance(camera, LensCamera):
+            return 1 if camera.window is None else 2
+        return int(isinstance(camera, PupilCamera))
+
+    def _camera_block(self):
+        """The ``camera`` argument of ``cl/fan.cl`` (offsets ``CAM_*`` there), with the
+        host's own float64 values of every constant the camera's methods use."""
+        block = np.zeros(_CAM_COUNT, dtype=np.float64)
+        block[0] = self.scene.x_sheet
+        block[1:3] = self.renderer.origin
+        block[3] = self.renderer.pixel_size
+        camera = self.camera
+        pupil = camera.pupil if isinstance(camera, LensCamera) else camera
+        if isinstance(pupil, PupilCamera):
+            block[4:7] = pupil.axis
+            block[7:10] = pupil.centre
+            block[10] = 0.5 * pupil.diameter
+        if self._camera_kind() == 2:
+            # as LensCamera.directions, through_window and image_points compute them
+            window, aims = camera.window, camera.aim_points()
+            thickness = camera._thickness
+            depths = np.array(
+                [camera.scene.depth, thickness, aims[0, 0] - camera.scene.x_end - thickness]
+            )
+            ratios = np.array(
+                [
+                    1.0,
+                    camera.fluid_index / window.glass_index,
+                    camera.fluid_index / window.outside_index,
+                ]
+            )
+            block[11:14] = depths
+            block[14:17] = ratios
+            block[17:20] = depths * ratios
+            block[20] = np.sum(depths * ratios)
+            block[21] = 0.999 / ratios.max()
+            block[22] = camera.focus_x1
+        return block
+
+    def kernel(self, field, trace_options, positions, name="trace_fan"):
+        """The fan kernel (``name`` of ``cl/fan.cl``) and its trace arguments for this field
+        and settings; sets :attr:`straight_args`.
+
+        Parameters
+        ----------
+        field : Field or AnalyticField
+        trace_options : dict
+            ``step``, ``interp``, ``precision``.
+        positions : ndarray, shape (N, 2), or (N, 3) with ``depth``
+            The tracers (the step plan is made for the deepest).
+
+        Returns
+        -------
+        kernel, launch, plan
+        """
+        import pyopencl as cl
+
+        from rimcl.core.device import context_for
+        from rimcl.core.program import build_program, get_kernel
+
+        device = self.device
+        if self.depth:
+            probe = positions[[int(np.argmin(positions[:, 0]))]]
+            directions = tracer_directions(self.camera, probe)[0]
+        else:
+            probe = self.scene.in_sheet(positions[:1])
+            directions = self.camera.directions(positions[:1])[0]
+        origins = np.repeat(probe, len(directions), axis=0)
+        x_end = self.scene.x_end
+        precision = trace_options["precision"]
+        plan = plan_steps(field, trace_options["step"], x_end, origins, precision)
+        launch = prepare_launch(
+            field,
+            x_end=x_end,
+            plan=plan,
+            interp=trace_options["interp"],
+            precision=precision,
+            device=device,
+            origins=origins,
+            directions=directions,
+            kernel_shape=self.shape(),
+        )
+        defines = {
+            **launch.defines,
+            "RIMCL_CAMERA": self._camera_kind(),
+            "RIMCL_MIE": self.mie_mode,
+            "RIMCL_STRAIGHT": int(field.is_uniform),
+            "RIMCL_TRACER_DEPTH": int(self.depth),
+            # plane and pupil cameras image a tracer at its own depth on its own plane
+            "RIMCL_IMAGE_PLANE": int(self.depth and not isinstance(self.camera, LensCamera)),
+        }
+        # a uniform field's straight rays: the exit plane and the lateral box, in float64
+        self.straight_args = (
+            np.float64(x_end),
+            np.float64(launch.max_steps * plan.step * field.n_ref),  # straight_path_limit
+            cl.cltypes.make_double4(
+                field.box_lo[1], field.box_hi[1], field.box_lo[2], field.box_hi[2]
+            ),
+        )
+        kernel = get_kernel(build_program(context_for(device), "fan.cl", defines), name)
+        return kernel, launch, plan
+
+    def shape(self):
+        """The fan kernel's shape: the device's measured trace shape (the fan kernel's hot
+        loop is the trace's, rimcl.optics.shapes), else :data:`FAN_CPU_LANES` on CPUs;
+        work-groups of :data:`FAN_GROUP` unless a size was measured."""
+        import pyopencl as cl
+
+        shape = default_kernel_shape(self.device)
+        if tuned_entry(self.device) is None and self.device.type & cl.device_type.CPU:
+            shape = dataclasses.replace(shape, lanes=FAN_CPU_LANES)
+        if shape.group is None:
+            shape = dataclasses.replace(shape, group=FAN_GROUP)
+        return shape
+
+
 class DeviceEngine:
     """The device pipeline of one measurement (:class:`rimcl.ptv.run_setup.Setup`).
 
@@ -157,11 +340,9 @@ class DeviceEngine:
         self.queue = profiling_queue(device)
         self.imager = DeviceImager(imaging, self.rays, batch, device, self.queue)
         self.batch = self.imager.max_tracers
+        self.fan = FanStage(camera, scene, imaging.renderer, device, mie)
+        self.mie_mode = self.fan.mie_mode
         context = context_for(device)
-        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
-        self.aims = cl.Buffer(context, ro, hostbuf=np.ascontiguousarray(camera.aim_points()))
-        self.order = cl.Buffer(context, ro, hostbuf=lane_order(camera))
-        self.camera_block = cl.Buffer(context, ro, hostbuf=self._camera_block())
         size = self.batch * self.rays
         rw = cl.mem_flags.READ_WRITE
         self.tracers = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.batch * 16)
@@ -173,103 +354,11 @@ class DeviceEngine:
         self.sample_size = 0
         self.sample_buffers = None
         # Mie weights: made by the fan kernel from each ray's initial direction
-        self.mie_mode = 0
-        self.mie_args = (self.aims, np.int32(0), self.aims)
-        if mie is not None:
-            self.mie_mode, table = mie.device_table()
-            self.mie_args = (
-                cl.Buffer(context, ro, hostbuf=table),
-                np.int32((len(table) - 6) // 4),
-                cl.Buffer(context, rw, size=size * 8),
-            )
+        self.mie_args = self.fan.mie_args(
+            cl.Buffer(context, rw, size=size * 8) if mie is not None else None
+        )
         # two sets: the host fills one while the device works from the other
         self.host_sets = [self._host_arrays(), self._host_arrays()]
-
-    def _camera_kind(self):
-        """``RIMCL_CAMERA`` of ``cl/fan.cl``: 0 plane, 1 pupil (and a lens without a
-        window: its pupil, imaging onto the sheet), 2 lens behind a window."""
-        camera = self.camera
-        if isinstance(camera, LensCamera):
-            return 1 if camera.window is None else 2
-        return int(isinstance(camera, PupilCamera))
-
-    def _camera_block(self):
-        """The ``camera`` argument of ``cl/fan.cl`` (offsets ``CAM_*`` there), with the
-        host's own float64 values of every constant the camera's methods use."""
-        block = np.zeros(_CAM_COUNT, dtype=np.float64)
-        block[0] = self.scene.x_sheet
-        block[1:3] = self.imaging.renderer.origin
-        block[3] = self.imaging.renderer.pixel_size
-        camera = self.camera
-        pupil = camera.pupil if isinstance(camera, LensCamera) else camera
-        if isinstance(pupil, PupilCamera):
-            block[4:7] = pupil.axis
-            block[7:10] = pupil.centre
-            block[10] = 0.5 * pupil.diameter
-        if self._camera_kind() == 2:
-            # as LensCamera.directions, through_window and image_points compute them
-            window, aims = camera.window, camera.aim_points()
-            thickness = camera._thickness
-            depths = np.array(
-                [camera.scene.depth, thickness, aims[0, 0] - camera.scene.x_end - thickness]
-            )
-            ratios = np.array(
-                [
-                    1.0,
-                    camera.fluid_index / window.glass_index,
-                    camera.fluid_index / window.outside_index,
-                ]
-            )
-            block[11:14] = depths
-            block[14:17] = ratios
-            block[17:20] = depths * ratios
-            block[20] = np.sum(depths * ratios)
-            block[21] = 0.999 / ratios.max()
-            block[22] = camera.focus_x1
-        return block
-
-    def _fan(self, field, trace_options, positions, name="trace_fan"):
-        """The fan kernel (``name`` of ``cl/fan.cl``) and its trace arguments for this field
-        and settings."""
-        import pyopencl as cl
-
-        from rimcl.core.device import context_for
-        from rimcl.core.program import build_program, get_kernel
-
-        device = self.device
-        probe = self.scene.in_sheet(positions[:1])
-        directions = self.camera.directions(positions[:1])[0]
-        origins = np.repeat(probe, len(directions), axis=0)
-        x_end = self.scene.x_end
-        precision = trace_options["precision"]
-        plan = plan_steps(field, trace_options["step"], x_end, origins, precision)
-        launch = prepare_launch(
-            field,
-            x_end=x_end,
-            plan=plan,
-            interp=trace_options["interp"],
-            precision=precision,
-            device=device,
-            origins=origins,
-            directions=directions,
-            kernel_shape=self._fan_shape(),
-        )
-        defines = {
-            **launch.defines,
-            "RIMCL_CAMERA": self._camera_kind(),
-            "RIMCL_MIE": self.mie_mode,
-            "RIMCL_STRAIGHT": int(field.is_uniform),
-        }
-        # a uniform field's straight rays: the exit plane and the lateral box, in float64
-        self.straight_args = (
-            np.float64(x_end),
-            np.float64(launch.max_steps * plan.step * field.n_ref),  # straight_path_limit
-            cl.cltypes.make_double4(
-                field.box_lo[1], field.box_hi[1], field.box_lo[2], field.box_hi[2]
-            ),
-        )
-        kernel = get_kernel(build_program(context_for(device), "fan.cl", defines), name)
-        return kernel, launch, plan
 
     def initial_directions(self, field, trace_options, positions):
         """The initial directions the fan kernel traces from each tracer (made on the
@@ -292,15 +381,15 @@ class DeviceEngine:
         positions = np.ascontiguousarray(positions, dtype=np.float64)
         if not 0 < len(positions) <= self.batch:
             raise RimclError(f"give 1 to {self.batch} tracers, got {len(positions)}")
-        kernel, _, _ = self._fan(field, trace_options, positions, "fan_directions")
+        kernel, _, _ = self.fan.kernel(field, trace_options, positions, "fan_directions")
         n_rays = len(positions) * self.rays
         out = np.empty((len(positions), self.rays, 3), dtype=np.float64)
         directions = cl.Buffer(self.queue.context, cl.mem_flags.WRITE_ONLY, size=out.nbytes)
         cl.enqueue_copy(self.queue, self.tracers, positions)
         kernel.set_args(
             self.tracers,
-            self.aims,
-            self.camera_block,
+            self.fan.aims,
+            self.fan.camera_block,
             np.int32(self.rays),
             np.int32(n_rays),
             directions,
@@ -309,19 +398,6 @@ class DeviceEngine:
         cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), (FAN_GROUP,))
         cl.enqueue_copy(self.queue, out, directions)
         return out
-
-    def _fan_shape(self):
-        """The fan kernel's shape: the device's measured trace shape (the fan kernel's hot
-        loop is the trace's, rimcl.optics.shapes), else :data:`FAN_CPU_LANES` on CPUs;
-        work-groups of :data:`FAN_GROUP` unless a size was measured."""
-        import pyopencl as cl
-
-        shape = default_kernel_shape(self.device)
-        if tuned_entry(self.device) is None and self.device.type & cl.device_type.CPU:
-            shape = dataclasses.replace(shape, lanes=FAN_CPU_LANES)
-        if shape.group is None:
-            shape = dataclasses.replace(shape, group=FAN_GROUP)
-        return shape
 
     def _sample_buffers(self, count):
         import pyopencl as cl
@@ -349,7 +425,7 @@ class DeviceEngine:
         started = time.thread_time()
         extras = extras or {}
         sampler, canvas, bar = extras.get("sampler"), extras.get("canvas"), extras.get("bar")
-        kernel, launch, plan = self._fan(field, setup.trace_options, positions)
+        kernel, launch, plan = self.fan.kernel(field, setup.trace_options, positions)
         context = _Frame(setup, pass_, frame, scales, sampler, bar, positions, field, plan)
         if canvas is not None:
             self.imager.use_canvas(canvas.counts.shape)
@@ -418,16 +494,16 @@ class DeviceEngine:
             launch.counts,
             launch.params,
             self.tracers,
-            self.aims,
-            self.order,
-            self.camera_block,
+            self.fan.aims,
+            self.fan.order,
+            self.fan.camera_block,
             np.int32(self.rays),
             np.int32(n_rays),
             np.int32(launch.max_steps),
             *self.ray_buffers,
             *sample_args,
             *self.mie_args,
-            *self.straight_args,
+            *self.fan.straight_args,
         )
         items = -(-n_rays // launch.shape.lanes)
         group = launch.shape.group
@@ -469,8 +545,8 @@ class DeviceEngine:
         pass_.status_counts += status_counts
         pass_.vignetted += vignetted
         pass_.ray_steps += steps
-        timings["trace"] += _seconds(job.fan_event)
-        timings["render"] += _seconds(job.image_event)
+        timings["trace"] += event_seconds(job.fan_event)
+        timings["render"] += event_seconds(job.image_event)
         if job.sample_rays is not None and len(job.sample_rays):
             started = time.thread_time()
             self._take_sample(job, context)
@@ -488,7 +564,7 @@ class DeviceEngine:
         directions = self.camera.directions(positions[tracer], local % self.rays)
         origins = self.scene.in_sheet(positions[tracer])
         if field.is_uniform:
-            limit = self.straight_args[1]
+            limit = self.fan.straight_args[1]
             rows = straight_rays(
                 field, origins, directions, x_end=self.scene.x_end, max_length=limit
             )

@@ -14,6 +14,8 @@ from rimcl.optics.camera import LensCamera, seed_tracers
 #: Tracers are seeded over ``|x1 - x_sheet| <= SEED_HALF_WIDTH * thickness``, where the
 #: sheet intensity falls to exp(-8) = 3e-4: beyond, a tracer adds less than a count.
 SEED_HALF_WIDTH = 1.0
+#: How the frames are scaled to counts (:attr:`PivImaging.scaling`).
+PIV_SCALINGS = ("fixed", "per_image")
 
 
 def sheet_intensity(x1, x_sheet, thickness):
@@ -57,6 +59,11 @@ class PivImaging:
         Peak of an isolated in-focus tracer image, fraction of full scale, in (0, 1].
     band : float
         Width of the band around the field of view also seeded with tracers (pixels).
+    scaling : {"fixed", "per_image"}
+        ``fixed``: one scale for every frame (an isolated in-focus tracer at the sheet
+        centre peaks at ``peak_fraction`` of full scale; with sensor noise at the sensor's
+        ``peak_electrons``); ``per_image``: each frame's brightest pixel is set there (a
+        camera whose exposure is adjusted per image).
     """
 
     pixels: int = 512
@@ -66,6 +73,7 @@ class PivImaging:
     bit_depth: int = 16
     peak_fraction: float = 0.5
     band: float = 16.0
+    scaling: str = "fixed"
 
     def __post_init__(self):
         if int(self.pixels) != self.pixels or self.pixels < 16:
@@ -83,6 +91,10 @@ class PivImaging:
             raise RimclError(f"the peak fraction must be in (0, 1], got {self.peak_fraction}")
         if not (np.isfinite(self.band) and self.band >= 0):
             raise RimclError(f"the seeding band must be >= 0 pixels, got {self.band}")
+        if self.scaling not in PIV_SCALINGS:
+            raise RimclError(
+                f"unknown PIV frame scaling {self.scaling!r}; choose from {PIV_SCALINGS}"
+            )
 
     @property
     def psf_sigma(self):
@@ -132,13 +144,26 @@ class PivImaging:
             int(self.bit_depth),
         )
 
-    def scale(self, rays_per_tracer, psf_sigma):
-        """Counts per unit of light: an in-focus tracer centred on a pixel, its point
-        spread of σ ``psf_sigma`` pixels, peaks at ``peak_fraction`` of full scale (each of
-        its rays carrying light 1)."""
+    def peak_target(self, sensor=None):
+        """The peak of the scaling: ``peak_fraction`` of full scale (counts), or with a
+        noisy sensor its ``peak_electrons`` (e⁻)."""
+        if sensor is not None and sensor.noise:
+            return float(sensor.peak_electrons)
+        return self.peak_fraction * (2 ** int(self.bit_depth) - 1)
+
+    def scale(self, tracer_light, psf_sigma, sensor=None):
+        """The ``fixed`` scale, counts (with sensor noise e⁻) per unit of light: an
+        in-focus tracer at the sheet centre, centred on a pixel, its point spread of σ
+        ``psf_sigma`` pixels and its rays carrying ``tracer_light`` in all (the ray count,
+        or the sum of their Mie weights), peaks at :meth:`peak_target`."""
         centre_pixel = (ndtr(0.5 / psf_sigma) - ndtr(-0.5 / psf_sigma)) ** 2
-        full_scale = 2 ** int(self.bit_depth) - 1
-        return self.peak_fraction * full_scale / (rays_per_tracer * centre_pixel)
+        return self.peak_target(sensor) / (tracer_light * centre_pixel)
+
+    def frame_scale(self, light, sensor=None):
+        """The ``per_image`` scale of one frame: its brightest pixel at :meth:`peak_target`
+        (NaN for a dark frame)."""
+        peak = float(np.max(light)) if np.size(light) else 0.0
+        return self.peak_target(sensor) / peak if peak > 0 else float("nan")
 
     def describe(self, scene=None, camera=None):
         record = {
@@ -151,6 +176,7 @@ class PivImaging:
             "bit_depth": int(self.bit_depth),
             "peak_fraction": float(self.peak_fraction),
             "band_px": float(self.band),
+            "scaling": self.scaling,
             "seed_half_width_thicknesses": SEED_HALF_WIDTH,
             "renderer": "exact: pixel-integrated Gaussian per ray, cut at the renderer's pad",
         }
@@ -194,3 +220,39 @@ def seed_particles(scene, imaging, rng, camera=None):
     half = SEED_HALF_WIDTH * imaging.thickness(scene, camera)
     depth = scene.x_sheet + rng.uniform(-half, half, count)
     return np.column_stack([depth, in_plane])
+
+
+#: Image axes of the PIV frames in sheet axes: x (columns) along +x2, y (rows) along -x3.
+IMAGE_AXES = np.array([1.0, -1.0])
+
+
+def frame_pixels(renderer, shape, points):
+    """Sheet points ``(x2, x3)`` → PIV frame pixel coordinates ``(x, y)`` = (column, row).
+
+    The convention of every PIV output of rimcl (frames, truth, vectors, exports): row 0
+    at the top of the camera's view (the highest ``x3``), columns along ``x2``, pixel
+    centres at integer coordinates (pixel ``(row i, column j)`` at ``(j, i)``), as
+    scikit-image, trackpy and OpenPIV's image coordinates. The renderer's own grid
+    (:meth:`rimcl.imaging.render.Renderer.to_pixels`: pixel ``j`` spans ``[j, j + 1)``, rows
+    along ``+x3``) is flipped and shifted by half a pixel.
+
+    Parameters
+    ----------
+    renderer : rimcl.imaging.render.Renderer
+    shape : (int, int)
+        Frame ``(rows, columns)``.
+    points : ndarray, shape (..., 2)
+
+    Returns
+    -------
+    ndarray, float64, shape (..., 2)
+    """
+    grid = renderer.to_pixels(points)
+    return np.stack([grid[..., 0] - 0.5, shape[0] - 0.5 - grid[..., 1]], axis=-1)
+
+
+def frame_points(renderer, shape, pixels):
+    """The inverse of :func:`frame_pixels`: frame pixel coordinates → sheet ``(x2, x3)``."""
+    pixels = np.asarray(pixels, dtype=np.float64)
+    grid = np.stack([pixels[..., 0] + 0.5, shape[0] - 0.5 - pixels[..., 1]], axis=-1)
+    return renderer.to_sheet(grid)

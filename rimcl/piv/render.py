@@ -34,11 +34,11 @@ A PIV camera records full frames of many tracers lit by a light sheet of finite 
   scale), rounded and clipped to ``bit_depth`` bits; no sensor noise.
 
 Each pair is imaged twice by the same code: through the field, and through a uniform medium
-(``n = 1``, where every ray returns to its tracer). Frame arrays are ``(rows, columns)``
-with rows along ``x3`` and columns along ``x2``: pixel ``(i, j)`` covers
-``x2 ∈ fov_lo2 + [j, j+1) p``, ``x3 ∈ fov_lo3 + [i, i+1) p`` with ``p`` the pixel size (the
-convention of :mod:`rimcl.imaging.render` and :mod:`rimcl.piv.analysis`; row 0 is the lowest
-``x3``, so most viewers show ``x3`` pointing down).
+(``n = 1``, where every ray returns to its tracer). Frames are ``(rows, columns)`` stored
+with row 0 at the top of the camera's view (the highest ``x3``) and columns along ``x2``;
+pixel centres at integer coordinates (:func:`rimcl.piv.imaging_config.frame_pixels`, the
+convention of :mod:`rimcl.piv.analysis`, scikit-image, trackpy and OpenPIV's image
+coordinates), so ``dy > 0`` is motion towards lower ``x3``.
 
 The parts: :mod:`rimcl.piv.imaging_config` (imaging, sheet, seeding),
 :mod:`rimcl.piv.tracer_motion`, :mod:`rimcl.piv.frame_pair` (tracing and rendering),
@@ -53,9 +53,10 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.fields.crop import CroppedSource
 from rimcl.imaging.render import Renderer
+from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS
 from rimcl.optics.camera import Scene
 from rimcl.piv.analysis import PivSettings, WindowGrid
-from rimcl.piv.frame_pair import PivFrames, image_pair
+from rimcl.piv.frame_pair import PivFrames, image_frames
 from rimcl.piv.imaging_config import SEED_HALF_WIDTH, PivImaging, seed_particles
 from rimcl.piv.tracer_motion import move_tracers
 from rimcl.piv.truth import pair_weights, true_displacement
@@ -64,6 +65,7 @@ from rimcl.scene.config import (
     FluidConfig,
     IntegratorConfig,
     RunConfig,
+    SensorConfig,
 )
 
 #: Default time between exposures (time units): on the shipped sample (velocity rms 0.14
@@ -301,6 +303,16 @@ def _sheet_plane(source):
     return getattr(inner, "velocity_sheet_x1", None)
 
 
+def _progress(enabled, tracers, exposures):
+    """A progress bar over the tracers of every exposure to image (None when off)."""
+    if not enabled:
+        return None
+    from tqdm.auto import tqdm
+
+    total = None if tracers is None else tracers * exposures
+    return tqdm(total=total, unit="tracer", desc="piv render", disable=None)
+
+
 def run_piv_render(
     field=None,
     *,
@@ -312,6 +324,9 @@ def run_piv_render(
     fluid=None,
     run=None,
     reference=None,
+    sensor=None,
+    mie=None,
+    progress=False,
 ):
     """PIV frame pairs of one refractive-index case, through the field and a uniform medium.
 
@@ -332,10 +347,19 @@ def run_piv_render(
     fluid : rimcl.scene.config.FluidConfig, optional
         The fluid of ``dT=…``/``dS=…`` cases.
     run : rimcl.scene.config.RunConfig, optional
-        Device and rays per batch.
+        Device, engine (``device``: frames made on the OpenCL device; ``numpy``: the
+        reference) and rays per batch.
     reference : PivReference, optional
         From an earlier case with the same configuration: skips tracers, truth and the
         uniform-medium pair.
+    sensor : rimcl.scene.config.SensorConfig, optional
+        The camera's sensor (default: deterministic, ``imaging.bit_depth`` bits); its seed
+        defaults to ``piv.seed``. Noise draws: the uniform-medium frames pass 0, the
+        field's pass 1, exposure A frame 0, B frame 1.
+    mie : rimcl.scene.config.MieConfig, optional
+        Mie weights of the rays (default: off).
+    progress : bool
+        A progress bar over the tracers imaged (on a terminal).
 
     Returns
     -------
@@ -361,6 +385,10 @@ def run_piv_render(
         cam = camera_config.build(scene)
         device = select_device(run.device)
         renderer = imaging.renderer(scene, cam)
+        sensor_model = (SensorConfig() if sensor is None else sensor).build(
+            imaging.bit_depth, piv.seed
+        )
+        mie_weights = None if mie is None else mie.build(fluid)
         grid = WindowGrid.for_image(
             imaging.frame_shape(scene, cam), int(settings.window), float(settings.overlap)
         )
@@ -373,6 +401,8 @@ def run_piv_render(
             "imaging": imaging.describe(scene, cam),
             "truth_windows": {"window": int(settings.window), "overlap": float(settings.overlap)},
             "seed": int(piv.seed),
+            "sensor": sensor_model.describe(),
+            "mie": None if mie_weights is None else mie_weights.describe(),
             "trace": {
                 "interp": integrator.interp,
                 "precision": integrator.precision,
@@ -382,26 +412,40 @@ def run_piv_render(
         }
         options = {"interp": integrator.interp, "precision": integrator.precision}
         options["device"] = device
+        n_tracers = None if reference is None else reference.positions.shape[1]
+        bar = _progress(progress, n_tracers, 4 if reference is None else 2)
+        imaging_options = {
+            "rays_per_batch": run.rays_per_batch,
+            "engine": run.engine,
+            "sensor": sensor_model,
+            "mie": mie_weights,
+            "bar": bar,
+        }
         if reference is None:
             rng = np.random.default_rng(np.random.SeedSequence(int(piv.seed)))
             start = seed_particles(scene, imaging, rng, cam)
             positions, motion = move_tracers(source, scene, start, (t_a, t_b), frames)
             weights = pair_weights(positions, scene.x_sheet, imaging.thickness(scene, cam))
             uniform = uniform_like(source)
-            uniform_frames = image_pair(
+            if bar is not None:
+                bar.reset(total=4 * positions.shape[1])
+            uniform_frames = image_frames(
                 (uniform, uniform),
                 positions,
                 scene,
                 cam,
                 imaging,
                 {**options, "step": reference_step(integrator.step, source)},
-                run.rays_per_batch,
+                noise=(REFERENCE_PASS, 0),
+                **imaging_options,
             )
             reference = PivReference(
                 key={**key, "motion": motion},
                 positions=positions,
                 weights=weights,
-                truth=true_displacement(positions, renderer, grid, weights),
+                truth=true_displacement(
+                    positions, renderer, imaging.frame_shape(scene, cam), grid, weights
+                ),
                 uniform=uniform_frames,
             )
         elif {k: v for k, v in reference.key.items() if k != "motion"} != key:
@@ -415,15 +459,18 @@ def run_piv_render(
             case_index.field(source, frame_b, t_b),
         )
         delta_n_max = max(f.delta_n_range for f in fields)
-        measured = image_pair(
+        measured = image_frames(
             fields,
             reference.positions,
             scene,
             cam,
             imaging,
             {**options, "step": integrator.step},
-            run.rays_per_batch,
+            noise=(MEASURED_PASS, 0),
+            **imaging_options,
         )
+        if bar is not None:
+            bar.close()
     config = {
         **reference.key,
         "case": case_index.name,
@@ -433,7 +480,8 @@ def run_piv_render(
         "velocity_frames": frames,
         "n_tracers": int(reference.positions.shape[1]),
         "rays_per_batch": int(run.rays_per_batch),
-        "image_rows": "rows along x3 (row 0 lowest), columns along x2",
+        "image_rows": "row 0 at the top (highest x3), rows along -x3, columns along x2; "
+        "pixel centres at integer coordinates",
     }
     return PivRender(
         field=measured,

@@ -34,7 +34,7 @@ from rimcl.core.errors import RimclError
 from rimcl.core.provenance import atomic_path, stamp_h5, to_json
 from rimcl.core.tables_h5 import label_grid
 from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair, check_piv_memory
-from rimcl.piv.imaging_config import PivImaging
+from rimcl.piv.imaging_config import IMAGE_AXES, PivImaging, frame_pixels
 from rimcl.piv.render import PivConfig, run_piv_render
 from rimcl.piv.truth import window_means
 from rimcl.stats.summaries import error_summary
@@ -130,7 +130,9 @@ def optics_error(render, grid):
     """
     field, uniform = render.field.optics, render.uniform.optics
     error = ((field[1] - field[0]) - (uniform[1] - uniform[0])) / render.pixel_size
-    pixels = render.renderer.to_pixels(render.reference.positions[..., 1:])
+    error = error * IMAGE_AXES  # (x2, x3) -> image (x, y): y runs down, along -x3
+    shape = render.imaging.frame_shape(render.scene, render.camera)
+    pixels = frame_pixels(render.renderer, shape, render.reference.positions[..., 1:])
     middle = 0.5 * (pixels[0] + pixels[1])
     means, _ = window_means(grid, middle[:, 0], middle[:, 1], error, render.reference.weights)
     return means
@@ -356,6 +358,9 @@ def run_piv_case(
     fluid=None,
     run=None,
     reference=None,
+    sensor=None,
+    mie=None,
+    progress=False,
 ):
     """PIV errors of one refractive-index case (module docstring).
 
@@ -368,10 +373,12 @@ def run_piv_case(
         uniform medium).
     piv : rimcl.piv.render.PivConfig, optional
         Imaging, timing and correlation (``piv.settings``).
-    camera, integrator, fluid, run : optional
+    camera, integrator, fluid, run, sensor, mie : optional
         The :mod:`rimcl.scene.config` objects of :func:`rimcl.piv.render.run_piv_render`.
     reference : PivCaseReference, optional
         ``PivCase.reference`` of an earlier case of the same configuration.
+    progress : bool
+        A progress bar over the tracers imaged (on a terminal).
 
     Returns
     -------
@@ -392,6 +399,9 @@ def run_piv_case(
         fluid=fluid,
         run=run,
         reference=None if reference is None else reference.render,
+        sensor=sensor,
+        mie=mie,
+        progress=progress,
     )
     middle = time.perf_counter()
     if reference is None:
@@ -516,8 +526,9 @@ def agreement_with_ptv(piv_stats, ptv_stats):
 def configs_from_study(study):
     """The PIV measurement of a study (``[piv]`` and the shared sections of its scene).
 
-    The field, box, sheet, start frame, camera kind and optics, integrator, fluid, device
-    and tracer seed are the scene's (those of the PTV cases); the camera aims
+    The field, box, sheet, start frame, camera kind and optics, integrator, fluid, sensor,
+    Mie weights, engine, device and tracer seed are the scene's (those of the PTV cases); the
+    camera aims
     ``piv.rays`` rays per tracer (a plane camera a fan of ``round(√rays)²``).
 
     Parameters
@@ -528,7 +539,8 @@ def configs_from_study(study):
     -------
     piv : rimcl.piv.render.PivConfig
     configs : dict
-        ``camera``, ``integrator``, ``fluid``, ``run`` for :func:`run_piv_case`.
+        ``camera``, ``integrator``, ``fluid``, ``run``, ``sensor``, ``mie`` for
+        :func:`run_piv_case`.
     """
     shared, section = study.shared, study.piv
     rays = int(section.rays)
@@ -556,6 +568,8 @@ def configs_from_study(study):
         "integrator": shared.integrator,
         "fluid": shared.fluid,
         "run": shared.run,
+        "sensor": shared.sensor,
+        "mie": shared.mie,
     }
     return piv, configs
 
@@ -592,7 +606,9 @@ def case_file_problem(path, record, case):
     return None
 
 
-def run_study_cases(study, out_dir, record, cases, *, force=False, report=None, before_write=None):
+def run_study_cases(
+    study, out_dir, record, cases, *, force=False, report=None, before_write=None, progress=False
+):
     """The PIV case files of a study: one per case, atomic and resumable.
 
     A case whose file has no :func:`case_file_problem` is kept (unless ``force``); the
@@ -615,6 +631,8 @@ def run_study_cases(study, out_dir, record, cases, *, force=False, report=None, 
     before_write : callable, optional
         Called without arguments before the first case file is written (the study writes
         its ``scene.toml`` then, once the scene has proven itself).
+    progress : bool
+        A progress bar over each case's tracers imaged (on a terminal).
 
     Returns
     -------
@@ -647,6 +665,7 @@ def run_study_cases(study, out_dir, record, cases, *, force=False, report=None, 
             case=argument,
             piv=piv,
             reference=reference,
+            progress=progress,
             **configs,
         )
         reference = case.reference

@@ -94,14 +94,14 @@ def move_tracers(source, scene, start, times, frames):
     scene : rimcl.optics.camera.Scene
     start : ndarray, shape (N, 3)
         Positions at exposure A.
-    times : (float, float)
-        Times of exposures A and B.
+    times : sequence of float
+        Exposure times (A and B of a pair, or every frame of a sequence), increasing.
     frames : list of int
         The stored frames spanning them.
 
     Returns
     -------
-    positions : ndarray, float64, shape (2, N, 3)
+    positions : ndarray, float64, shape (len(times), N, 3)
     motion : str
         :data:`MOTION_3D` or :data:`MOTION_SHEET`.
     """
@@ -115,7 +115,7 @@ def move_tracers(source, scene, start, times, frames):
     if getattr(source, "has_full_velocity", False):
         positions = integrate_tracks(FlowVelocity(source, frames), start, times, substeps)
         return positions, MOTION_3D
-    velocity = SheetVelocity.from_source(source, scene.x_sheet, times[0], times[1])
+    velocity = SheetVelocity.from_source(source, scene.x_sheet, times[0], times[-1])
     in_plane = integrate_tracks(velocity, start[:, 1:], times, substeps)
-    depth = np.broadcast_to(start[None, :, :1], (2, len(start), 1))
+    depth = np.broadcast_to(start[None, :, :1], (len(times), len(start), 1))
     return np.concatenate([depth, in_plane], axis=-1), MOTION_SHEET

@@ -21,7 +21,7 @@ import numpy as np
 
 from rimcl.core.provenance import atomic_paths, check_output, stamp_h5
 from rimcl.piv.analysis import write_tiff
-from rimcl.piv.imaging_config import sheet_intensity
+from rimcl.piv.imaging_config import frame_pixels, sheet_intensity
 
 TRUTH_SCHEMA = "piv_truth"
 TRUTH_SCHEMA_VERSION = 1
@@ -31,14 +31,15 @@ MEDIA = ("field", "uniform")
 def window_means(grid, col, row, values, weights):
     """Weighted means of per-tracer values over each interrogation window.
 
-    A tracer belongs to window ``(r, c)`` when ``cols[c] <= col < cols[c] + size`` and
-    ``rows[r] <= row < rows[r] + size`` (overlapping windows share tracers).
+    A tracer belongs to window ``(r, c)`` when it lies on the window's pixels:
+    ``cols[c] - 1/2 <= col < cols[c] + size - 1/2`` and the same for rows (pixel centres
+    at integer coordinates; overlapping windows share tracers).
 
     Parameters
     ----------
     grid : rimcl.piv.analysis.WindowGrid
     col, row : ndarray, shape (N,)
-        Tracer positions in pixels (columns, rows).
+        Tracer positions in frame pixels (:func:`rimcl.piv.imaging_config.frame_pixels`).
     values : ndarray, shape (N, K)
     weights : ndarray, shape (N,)
         Non-negative; rows with a non-finite value or weight are left out.
@@ -52,6 +53,8 @@ def window_means(grid, col, row, values, weights):
     """
     values = np.asarray(values, dtype=np.float64)
     weights = np.asarray(weights, dtype=np.float64)
+    # pixel j spans [j - 1/2, j + 1/2): measure from the pixels' outer edges
+    col, row = np.asarray(col) + 0.5, np.asarray(row) + 0.5
     usable = np.isfinite(col) & np.isfinite(row) & np.isfinite(weights)
     usable &= np.all(np.isfinite(values), axis=1)
     col, row, values, weights = col[usable], row[usable], values[usable], weights[usable]
@@ -91,7 +94,7 @@ def pair_weights(positions, x_sheet, thickness):
     return intensity[0] * intensity[1]
 
 
-def true_displacement(positions, renderer, grid, weights):
+def true_displacement(positions, renderer, shape, grid, weights):
     """The true in-plane displacement averaged over each interrogation window (pixels).
 
     Tracers are assigned to windows by the midpoint of their two true image positions (a
@@ -102,6 +105,8 @@ def true_displacement(positions, renderer, grid, weights):
     positions : ndarray, shape (2, N, 3)
     renderer : rimcl.imaging.render.Renderer
         Maps ``(x2, x3)`` to pixels.
+    shape : (int, int)
+        Frame ``(rows, columns)``.
     grid : rimcl.piv.analysis.WindowGrid
         The final-pass windows.
     weights : ndarray, shape (N,)
@@ -109,11 +114,12 @@ def true_displacement(positions, renderer, grid, weights):
     Returns
     -------
     dict
-        ``x, y`` (window centres, px, shape (rows, columns)), ``dx, dy`` (px; NaN for an
-        empty window), ``weight`` (sum of the weights) and ``tracers`` (count of tracers
-        with weight above 1e-3 whose midpoint is in the window).
+        ``x, y`` (window centres, px, shape (rows, columns)), ``dx, dy`` (px, ``dy > 0``
+        down the frame; NaN for an empty window), ``weight`` (sum of the weights) and
+        ``tracers`` (count of tracers with weight above 1e-3 whose midpoint is in the
+        window).
     """
-    pixels = renderer.to_pixels(positions[..., 1:])
+    pixels = frame_pixels(renderer, shape, positions[..., 1:])
     middle = 0.5 * (pixels[0] + pixels[1])
     motion = pixels[1] - pixels[0]
     means, total = window_means(grid, middle[:, 0], middle[:, 1], motion, weights)
@@ -183,7 +189,8 @@ def _write_set(paths, result):
         for index, frame in enumerate("AB"):
             write_tiff(paths[f"{medium}_{frame}"], pair.images[index], result.config)
     reference = result.reference
-    pixels = result.renderer.to_pixels(reference.positions[..., 1:])
+    shape = result.imaging.frame_shape(result.scene, result.camera)
+    pixels = frame_pixels(result.renderer, shape, reference.positions[..., 1:])
     thickness = result.imaging.thickness(result.scene, result.camera)
     with h5py.File(paths["truth"], "w") as h5:
         h5.attrs["rimcl_schema"] = TRUTH_SCHEMA
@@ -195,9 +202,10 @@ def _write_set(paths, result):
         h5.attrs["pixel_size"] = result.pixel_size
         h5.attrs["motion"] = result.motion
         h5.attrs["coordinates"] = (
-            "positions x1, x2, x3 in field length units; col, row in pixels: pixel (row i, "
-            "column j) covers x2 in fov_lo2 + [j, j+1) * pixel_size, x3 in fov_lo3 + [i, i+1) "
-            "* pixel_size; TIFF rows follow x3 (row 0 lowest)"
+            "positions x1, x2, x3 in field length units; col, row in pixels of the TIFF "
+            "frames: row 0 at the top (highest x3), columns along x2, pixel centres at "
+            "integer coordinates (pixel (row i, column j) centred at col = j, row = i); "
+            "truth dx along columns, dy along rows (dy > 0: down the frame, towards lower x3)"
         )
         particles = h5.create_group("particles")
         for index, frame in enumerate("AB"):

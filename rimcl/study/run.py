@@ -455,6 +455,7 @@ def run_study(
                 force=force,
                 report=say,
                 before_write=scene_file.settle,
+                progress=progress,
             )
             scene_file.settle()
             ran += [f"piv/{name}" for name in piv_ran]
@@ -468,7 +469,7 @@ def run_study(
                     out_dir, stats, ran, skipped, seconds, False, time.perf_counter() - started
                 )
         say("statistics and figures" if figures else "statistics")
-        stats = write_study_outputs(out_dir, study, case_files, figures, piv_files)
+        stats = write_study_outputs(out_dir, study, case_files, figures, piv_files, progress)
     return StudyResult(out_dir, stats, ran, skipped, seconds, True, time.perf_counter() - started)
 
 
@@ -522,9 +523,10 @@ def _numerics_case(study, names):
     return next((name for name in names if name in CASES or name.startswith("G=")), None)
 
 
-def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=()):
+def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=(), progress=False):
     """``stats.json``, the figures and ``summary.md`` (last) of finished case files
-    (PTV render files, PIV case files).
+    (PTV render files, PIV case files); ``progress``: a progress bar over the steps (on a
+    terminal).
 
     Returns
     -------
@@ -541,6 +543,10 @@ def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=()):
 
     config = {"scene": study.scene_record(), "study_dir": str(out_dir)}
     stats = {"cases": [], "config": config}
+    # steps: each case file read, PTV statistics, PTV figures, PIV results, PIV figures,
+    # the files written
+    total = len(case_files) + 2 * bool(case_files) + 2 * bool(piv_files) + 1
+    bar = _steps_bar(progress, total)
     if case_files:
         all_tables = []
         for path in case_files:
@@ -548,14 +554,17 @@ def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=()):
             if tables.case != path.stem:
                 raise RimclError(f"{path} holds case {tables.case!r}, not {path.stem!r}")
             all_tables.append(tables)
+            bar.update()
         all_tables = check_cases(all_tables)
         stats = compute_stats(all_tables, config=config)
         for case in stats["cases"]:
             case["physical_equivalent"] = physical_equivalents(
                 case["delta_n_max"], study.shared.fluid
             )
+        bar.update()
         if figures:
             write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
+        bar.update()
         numerics_case = _numerics_case(study, [t.case for t in all_tables])
         if figures and numerics_case is not None:
             stats["numerics"] = _numerics(study, numerics_case, out_dir, stats["versions"])
@@ -581,9 +590,22 @@ def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=()):
                 case["piv"]["units"] = piv_units(
                     case["piv"], study.shared.camera.length_m, study.shared.time.time_s
                 )
+        bar.update()
         if figures:
             write_piv_figures(piv_cases, out_dir / "figures", config=config, overwrite=True)
+        bar.update()
     write_json(out_dir / "stats.json", stats, overwrite=True)
     write_tidy(out_dir / "stats.csv", stats)
     _write_text(out_dir / "summary.md", summary_markdown(stats, study))
+    bar.update()
+    bar.close()
     return stats
+
+
+def _steps_bar(enabled, total):
+    """A progress bar over the statistics-and-figures steps (disabled: does nothing)."""
+    from tqdm.auto import tqdm
+
+    return tqdm(
+        total=total, unit="step", desc="statistics and figures", disable=None if enabled else True
+    )

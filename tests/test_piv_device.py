@@ -1,0 +1,126 @@
+"""PIV frames on the device engine (cl/frame.cl) against the NumPy reference."""
+
+import numpy as np
+import pytest
+
+from rimcl.fields.field import Field
+from rimcl.imaging.frame_device import DeviceFrames, bin_to_tiles
+from rimcl.imaging.mie import MieWeights
+from rimcl.imaging.sensor import Sensor
+from rimcl.optics.camera import FlatWindow, LensCamera, PupilCamera, Scene
+from rimcl.piv.frame_pair import _expose, image_frames
+from rimcl.piv.imaging_config import PivImaging, seed_particles, sheet_intensity
+
+TRACE = {"step": None, "interp": "trilinear", "precision": "f32c"}
+MIE = MieWeights(
+    diameter_um=2.0,
+    particle_index=1.59,
+    fluid_index=1.33,
+    wavelength_nm=532.0,
+    sheet_direction=(0.0, 1.0, 0.0),
+    polarisation="unpolarised",
+)
+
+
+def _bump_field(x_sheet, depth):
+    """A clamped grid with a smooth bump of δn (rays bend and spread)."""
+    counts = np.array([6, 10, 10])
+    lo, hi = np.array([0.0, -0.1, -0.1]), np.array([x_sheet + depth, 1.1, 1.1])
+    spacing = (hi - lo) / (counts - 1)
+    x = [lo[a] + spacing[a] * np.arange(counts[a]) for a in range(3)]
+    x3, x2, x1 = np.meshgrid(x[2], x[1], x[0], indexing="ij")
+    delta_n = 2e-3 * np.exp(-((x2 - 0.5) ** 2 + (x3 - 0.4) ** 2) / 0.05) * x1
+    return Field.from_arrays(delta_n, spacing=spacing, origin=lo, n_ref=1.33)
+
+
+@pytest.fixture(scope="module")
+def scene_and_tracers():
+    scene = Scene(0.05, 1.05, np.zeros(2), np.ones(2), False)
+    imaging = PivImaging(pixels=64, sheet_thickness=4 / 64, density=0.04)
+    tracers = seed_particles(scene, imaging, np.random.default_rng(5))
+    return scene, imaging, tracers, _bump_field(0.05, 1.0)
+
+
+@pytest.mark.parametrize("mie", [None, MIE], ids=["plain", "mie"])
+def test_device_light_matches_numpy_within_ulps(device, scene_and_tracers, mie):
+    scene, imaging, tracers, field = scene_and_tracers
+    camera = PupilCamera(scene, diameter=0.3, distance=3.0, rays=12)
+    renderer = imaging.renderer(scene, camera)
+    shape = imaging.frame_shape(scene, camera)
+    intensity = sheet_intensity(tracers[:, 0], scene.x_sheet, imaging.thickness(scene))
+    options = {**TRACE, "device": device}
+    light, optics, collected, totals = _expose(
+        field, tracers, intensity, camera, scene, renderer, shape, options, 10**9, mie
+    )
+    frames = DeviceFrames(camera, scene, renderer, shape, device, mie)
+    got, got_optics, got_collected, got_totals = frames.expose(field, tracers, intensity, TRACE)
+    again = frames.expose(field, tracers, intensity, TRACE)[0]
+    assert np.array_equal(got, again)  # deterministic: the same bits run after run
+    assert light.max() > 0 and np.count_nonzero(light) > light.size // 2
+    # the same footprints and products in the same order; only ndtr differs (a few ulp
+    # of 1), so every pixel within 4 ulp of the frame's brightest
+    ulp = np.spacing(light.max())
+    assert np.abs(got - light).max() <= 4 * ulp
+    assert np.mean(got == light) > 0.1  # many pixels are bit-identical
+    assert np.array_equal(got_collected, collected)
+    np.testing.assert_allclose(got_optics, optics, rtol=0, atol=1e-14)
+    assert np.array_equal(got_totals["status"], totals["status"])
+    assert got_totals["vignetted"] == totals["vignetted"] > 0
+    assert got_totals["off_frame"] == totals["off_frame"] > 0
+
+
+def test_lens_behind_a_window_with_noise_gives_the_same_counts(device, scene_and_tracers):
+    scene, imaging, tracers, field = scene_and_tracers
+    camera = LensCamera(
+        scene,
+        length_m=0.05,
+        focal_length_mm=50.0,
+        f_number=8.0,
+        magnification=0.5,
+        pixel_pitch_um=200.0,
+        pixels=(64, 48),
+        rays=16,
+        fluid_index=1.33,
+        window=FlatWindow(thickness_mm=5.0),
+    )
+    imaging = PivImaging(pixels=64, sheet_thickness=4 * camera.pixel_size, bit_depth=12)
+    moved = tracers + np.array([0.0, 0.6, -0.3]) * camera.pixel_size
+    positions = np.stack([tracers, moved])
+    sensor = Sensor(bit_depth=12, noise=True, background_e=20.0, peak_electrons=2000.0, seed=9)
+    made = {
+        engine: image_frames(
+            (field, field),
+            positions,
+            scene,
+            camera,
+            imaging,
+            {"device": device},
+            engine=engine,
+            sensor=sensor,
+            mie=MIE,
+        )
+        for engine in ("numpy", "device")
+    }
+    numpy_frames, device_frames = made["numpy"], made["device"]
+    assert numpy_frames.images.shape == (2, 48, 64)
+    assert numpy_frames.images.max() > 100  # tracers above the noise
+    # counts differ only where the light is within ulps of a rounding or Poisson boundary
+    differ = numpy_frames.images.astype(int) - device_frames.images.astype(int)
+    assert np.count_nonzero(differ) <= 2 and np.abs(differ).max() <= 1
+    assert numpy_frames.scales == device_frames.scales
+    assert numpy_frames.ray_counts == device_frames.ray_counts
+    assert numpy_frames.ray_counts["vignetted"] > 0
+
+
+def test_tracers_are_binned_to_every_tile_their_footprint_reaches():
+    # frame 70 x 100 (rows, columns), tiles of 32: 4 x 3 tiles
+    boxes = np.array([[0, 0, 0, 0], [30, 40, 35, 40], [-50, -50, -40, -40], [99, 69, 99, 69]])
+    start, tracers, tiles_x = bin_to_tiles(boxes, np.array([1, 5, 3, 2]), 2, (70, 100), tile=32)
+    assert tiles_x == 4 and len(start) == 4 * 3 + 1
+    members = {t: list(tracers[start[t] : start[t + 1]]) for t in range(12)}
+    # tracer 0 at pixel (0, 0), footprint [0, 2]²: tile 0 only
+    # tracer 1: columns 28-37, rows 38-42: tiles (row 1, columns 0 and 1)
+    # tracer 2 lies off the frame; tracer 3 in the last pixel: tile (row 2, column 3)
+    assert members[0] == [0] and members[4] == [1] and members[5] == [1]
+    assert members[11] == [3]
+    assert sum(len(m) for m in members.values()) == 4

@@ -1,0 +1,81 @@
+"""Time-resolved PIV sequences (rimcl.piv.sequence): frames, dense truth, particle tables."""
+
+import dataclasses
+
+import h5py
+import numpy as np
+import pytest
+import tifffile
+from test_piv_images import SMALL_PIV, _moving_box, small
+
+from rimcl.core.errors import RimclError
+from rimcl.piv.sequence import run_piv_sequence, write_piv_sequence
+
+
+@pytest.fixture(scope="module")
+def box(tmp_path_factory):
+    return _moving_box(tmp_path_factory.mktemp("sequence") / "box.h5")
+
+
+def test_sequence_of_a_uniform_flow_knows_its_truth(box, device, tmp_path):
+    piv = dataclasses.replace(SMALL_PIV, dt=0.05)
+    options = {**small(device), "piv": piv}
+    made = run_piv_sequence(
+        box, case="C2", frames=3, seeds=(1, 2), length_m=0.01, time_s=0.5, **options
+    )
+    assert [s.seed for s in made] == [1, 2]
+    first, second = made
+    pixel = first.config["imaging"]["pixel_size"]
+    # every pixel of the dense truth moves by u dt per frame, in px and in m/s (the file
+    # stores the velocity in float32: 0.3 and -0.2 to 4e-8 relative)
+    assert first.truth_px.shape == (2, 96, 96, 2)
+    np.testing.assert_allclose(first.truth_px[..., 0], 0.3 * 0.05 / pixel, rtol=1e-7)
+    np.testing.assert_allclose(first.truth_px[..., 1], 0.2 * 0.05 / pixel, rtol=1e-7)
+    np.testing.assert_allclose(first.truth_ms[..., 0], 0.3 * 0.01 / 0.5, rtol=1e-7)
+    # the particle table: three exposures of the same tracers, moved by u dt each
+    steps = np.diff(first.positions, axis=0)
+    np.testing.assert_allclose(
+        steps, np.broadcast_to([0.001, 0.015, -0.01], steps.shape), atol=1e-12
+    )
+    np.testing.assert_allclose(np.diff(first.pixels, axis=0)[..., 0], 0.015 / pixel, rtol=1e-7)
+    assert first.frames.images.shape == (3, 96, 96)
+    # independent realisations: other tracers, other frames
+    assert first.positions.shape[1] == second.positions.shape[1]
+    assert not np.array_equal(first.positions, second.positions)
+    assert not np.array_equal(first.frames.images, second.frames.images)
+    paths = write_piv_sequence(tmp_path / "seq", first)
+    assert [p.name for p in paths] == [
+        "seq_seed1_000.tif",
+        "seq_seed1_001.tif",
+        "seq_seed1_002.tif",
+        "seq_seed1_truth.h5",
+    ]
+    np.testing.assert_array_equal(tifffile.imread(paths[1]), first.frames.images[1])
+    with h5py.File(paths[-1]) as h5:
+        assert h5.attrs["rimcl_schema"] == "piv_sequence_truth"
+        np.testing.assert_array_equal(h5["truth/dx"][...], first.truth_px[..., 0])
+        assert h5["particles/position"].shape == first.positions.shape
+        assert "m/s" in h5.attrs["units"]
+
+
+def test_sequence_beyond_the_stored_frames_is_refused(box, device):
+    with pytest.raises(RimclError, match="beyond the last stored frame"):
+        run_piv_sequence(box, case="C2", frames=4, **small(device))
+
+
+def test_cli_writes_one_set_of_files_per_seed(box, tmp_path):
+    from click.testing import CliRunner
+
+    from rimcl.cli.main import cli
+
+    base = ["piv", "sequence", "--field", box, "--case", "C2", "--pixels", "32", "--fan", "2"]
+    runner = CliRunner()
+    bad = runner.invoke(cli, [*base, "--seeds", "1,x", "-o", str(tmp_path / "bad")])
+    assert bad.exit_code != 0 and "comma-separated integers" in bad.output
+    ok = runner.invoke(
+        cli, [*base, "--frames", "2", "--dt", "0.05", "--seeds", "0,1", "-o", str(tmp_path / "s")]
+    )
+    assert ok.exit_code == 0, ok.output
+    for seed in (0, 1):
+        assert (tmp_path / f"s_seed{seed}_001.tif").exists()
+        assert (tmp_path / f"s_seed{seed}_truth.h5").exists()
