@@ -55,9 +55,11 @@ class CameraConfig:
     wavelength_nm, particle_diameter_um : float
         Lens camera: light and tracer size (diffraction and geometric image).
     window_thickness_mm, window_index, outside_index : float
-        Lens camera: a flat window between fluid and lens (thickness 0: none).
+        Lens camera: a flat window between fluid and lens (thickness 0: the bare
+        fluid/outside interface).
     fluid_index : float
-        Lens camera: index of the fluid at the window's inner face.
+        Lens camera: index of the fluid it is aimed and focused through; None: the
+        measured case's mean index.
     """
 
     kind: str = "plane"
@@ -79,16 +81,20 @@ class CameraConfig:
     window_thickness_mm: float = 0.0
     window_index: float = 1.52
     outside_index: float = 1.0
-    fluid_index: float = 1.0
+    fluid_index: float = None
 
-    def build(self, scene):
-        """The camera object for a :class:`rimcl.optics.camera.Scene`."""
+    def build(self, scene, medium_index=None):
+        """The camera object for a :class:`rimcl.optics.camera.Scene`.
+
+        ``medium_index`` is the measured case's mean refractive index: a lens camera is
+        aimed and focused through it unless ``fluid_index`` is given (default 1).
+        """
         if self.kind not in CAMERAS:
             raise RimclError(f"unknown camera {self.kind!r}; choose from {CAMERAS}")
         if self.kind == "plane":
             return PlaneCamera(scene, int(self.fan))
         if self.kind == "lens":
-            return self._lens(scene)
+            return self._lens(scene, medium_index)
         distance = 4.0 * scene.depth if self.distance is None else float(self.distance)
         diameter = self.aperture_diameter
         if diameter is None and self.focal_length is None and self.f_number is None:
@@ -103,17 +109,16 @@ class CameraConfig:
             rays=int(self.pupil_rays),
         )
 
-    def _lens(self, scene):
+    def _lens(self, scene, medium_index):
         if self.length_m is None:
             raise RimclError(
                 "the lens camera needs the field's physical size: field.length_m "
                 "(metres per field length unit)"
             )
-        window = None
-        if self.window_thickness_mm:
-            window = FlatWindow(
-                float(self.window_thickness_mm), float(self.window_index), float(self.outside_index)
-            )
+        # always a wall: thickness 0 is the bare fluid/air interface, which refracts too
+        window = FlatWindow(
+            float(self.window_thickness_mm), float(self.window_index), float(self.outside_index)
+        )
         return LensCamera(
             scene,
             float(self.length_m),
@@ -125,7 +130,11 @@ class CameraConfig:
             pixels=tuple(int(p) for p in self.sensor_pixels),
             wavelength_nm=float(self.wavelength_nm),
             particle_diameter_um=float(self.particle_diameter_um),
-            fluid_index=float(self.fluid_index),
+            fluid_index=float(
+                self.fluid_index
+                if self.fluid_index is not None
+                else (1.0 if medium_index is None else medium_index)
+            ),
             window=window,
             rays=int(self.pupil_rays),
         )
@@ -224,7 +233,8 @@ class SensorConfig:
 class MieConfig:
     """Mie weights of the rays (:class:`rimcl.imaging.mie.MieWeights`); uniform when not enabled.
 
-    ``fluid_index`` None: the fluid's base index (``[fluid]``), else 1.
+    ``fluid_index`` None: the index of the medium around the tracers, the measured case's
+    mean index (the fluid's base index, else 1, without one).
     """
 
     enabled: bool = False
@@ -237,11 +247,13 @@ class MieConfig:
     polarisation: str = "unpolarised"
     polarisation_direction: tuple = (0.0, 0.0, 1.0)
 
-    def build(self, fluid=None):
-        """The weights, or None when off."""
+    def build(self, fluid=None, medium_index=None):
+        """The weights, or None when off (``medium_index``: the case's mean index)."""
         if not self.enabled:
             return None
         fluid_index = self.fluid_index
+        if fluid_index is None:
+            fluid_index = medium_index
         if fluid_index is None:
             fluid_index = 1.0 if fluid is None else float(fluid.index())
         polarisation = self.polarisation
@@ -483,7 +495,6 @@ class MeasureConfig:
         integrator, run = scene["integrator"], scene["run"]
         box = field["box"]
         fluid = FluidConfig(**scene["fluid"])
-        base_fluid = fluid.build()
         return cls(
             box=None if box is None else tuple(tuple(pair) for pair in box),
             x_sheet=field["x_sheet"],
@@ -508,7 +519,6 @@ class MeasureConfig:
                 window_thickness_mm=camera["window_thickness_mm"],
                 window_index=camera["window_index"],
                 outside_index=camera["outside_index"],
-                fluid_index=1.0 if base_fluid is None else float(base_fluid.index()),
             ),
             renderer=RendererConfig(
                 kind=renderer["kind"],

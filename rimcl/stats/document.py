@@ -212,8 +212,10 @@ METHODS = {
         "usable rows of the case)"
     ),
     "convergence": (
-        "nested random subsamples of N/16 ... N tracers; not converged: the magnitude grows "
-        "over N/4 < N/2 < N and the value at N lies outside the 95 % interval at N/4"
+        "nested random subsamples of N/16 ... N tracers; not converged: the value at N lies "
+        "outside the 95 % interval at N/4 or at N/2 (either direction), or, for the ratio "
+        "statistics (systematic, random), the largest 3 rows carry more than half of "
+        "sum((error/truth)^2)"
     ),
     "area_change_peak": "centre of the fullest bin of a histogram of whole-pixel steps",
     "area_change_p90": "90th percentile of |ΔA/A| over the rows with a reference image",

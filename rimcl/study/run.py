@@ -342,7 +342,9 @@ def run_study(
                 scene, out_dir, scheduler, force=force, progress=progress, report=say
             )
             todo = []  # the cluster measured every case
-        references = {}  # threshold -> reference images (they depend on it, not on the case)
+        # reference images: they depend on the threshold, not on the case (a lens camera's
+        # and Mie weights' also on the case's mean index); the one that fits is reused
+        references = []
         for index, (name, case) in enumerate(todo, start=1):
             path = case_path(out_dir, name)
             step = f"[{index}/{len(cases)}] {name}"
@@ -354,15 +356,15 @@ def run_study(
             say(f"{step}: " + (f"{path.name} {reason}; measuring again" if reason else "measuring"))
             case_start = time.perf_counter()
             config = MeasureConfig.from_scene(scene, name)
-            threshold = config.renderer.threshold
             result = run_render(
                 scene["field"]["path"] or None,
                 case=case,
                 config=config,
-                reference=references.get(threshold),
+                reference=references,
                 progress=progress,
             )
-            references[threshold] = result.reference
+            if all(r is not result.reference for r in references):
+                references.append(result.reference)
             result.config[SCENE_RECORD] = comparable_scene(scene)
             scene_file.settle()
             write_render(path, result, overwrite=True)
