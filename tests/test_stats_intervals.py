@@ -9,11 +9,10 @@ from synthetic_render import write_render_file
 
 from rimcl.stats.bootstrap import TracerBootstrap, weighted_quantiles
 from rimcl.stats.convergence import CONVERGENCE_SEED, not_converged
-from rimcl.stats.summaries import INFLUENCE_LIMIT
 from rimcl.stats.document import case_statistics, run_stats
 from rimcl.stats.peaks import pdf_peak
 from rimcl.stats.render_file import load_render
-from rimcl.stats.summaries import error_summary
+from rimcl.stats.summaries import INFLUENCE_LIMIT, error_summary
 
 
 def rms_ratio(error, truth):
