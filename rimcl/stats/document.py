@@ -129,9 +129,10 @@ def case_statistics(tables):
         Keys documented in the README (``name``, ``G``, ``delta_n_max``, ``n_tracers``,
         ``n_used``, ``n_excluded``, ``position_error_*`` with ``*_ci95``, ``velocity``,
         ``acceleration`` (and ``velocity_fit``, ``acceleration_fit`` where the file has
-        them), ``baseline``, ``optics`` and ``imaging`` (where the file has the optics
-        columns), ``budget_verdict``, ``convergence``, ``area_change_peak``,
-        ``circularity_peak``, ``rays``).
+        them), ``against_truth`` (the same groups against the truth, the paper's
+        definition; see :data:`ERROR_DEFINITIONS`), ``baseline``, ``optics`` and
+        ``imaging`` (where the file has the optics columns), ``budget_verdict``,
+        ``convergence``, ``area_change_peak``, ``circularity_peak``, ``rays``).
     """
     excluded_ids, excluded_counts = flagged_tracers(tables)
     noted_ids, noted_counts = flagged_tracers(tables, NOTE_COLUMN)
@@ -156,6 +157,17 @@ def case_statistics(tables):
     }
     refraction = refraction_errors(tables, tracers, blocks, bootstrap)
     case.update(refraction)
+    # the paper's definition: measured minus the truth (refraction plus the baseline)
+    case["against_truth"] = {
+        group: vector_errors(
+            table,
+            symbol,
+            vector_columns(table, symbol, "meas"),
+            vector_columns(table, symbol, "true"),
+            bootstrap,
+        )
+        for group, (symbol, table) in blocks.items()
+    }
     case["baseline"] = {
         group: vector_errors(
             table,
@@ -199,7 +211,23 @@ def check_cases(all_tables):
     return sorted(all_tables, key=lambda tables: tables.delta_n_max)
 
 
+#: The two error definitions of stats.json, named.
+ERROR_DEFINITIONS = {
+    "refraction": (
+        "measured minus reference (the same tracers imaged through a uniform medium): "
+        "refraction alone; the blocks position_error_*, velocity, acceleration, "
+        "velocity_fit, acceleration_fit, optics, imaging"
+    ),
+    "against_truth": (
+        "measured minus truth, the paper's ε = u' - u: refraction plus the baseline "
+        "(finite differences or fit, and imaging, without refraction); the block "
+        "against_truth"
+    ),
+    "baseline": "reference minus truth: the measurement's own error without refraction",
+}
+
 METHODS = {
+    "error_definitions": ERROR_DEFINITIONS,
     "position_error_peak": "mode of a Gaussian KDE (Scott) of log10(|x_meas - x_ref| / L)",
     "excluded": "a tracer with any flag in any row is left out of its case",
     "ci95": (
