@@ -66,8 +66,12 @@ def _case_list(_ctx, _param, value):
 )
 @click.option("--tracers", type=COUNT, help="Tracers [tracers.count].")
 @click.option("--seed", type=INDEX, help="Random seed [tracers.seed].")
-@click.option("--camera", type=click.Choice(["plane", "pupil"]), help="Camera model [camera.kind].")
-@click.option("--fan", type=COUNT, help="Plane camera rays per side [camera.fan].")
+@click.option(
+    "--camera", type=click.Choice(["lens", "plane", "pupil"]), help="Camera model [camera.kind]."
+)
+@click.option(
+    "--fan", type=COUNT, help="Plane camera rays per side [camera.fan]; alone: the plane camera."
+)
 @click.option("--renderer", type=click.Choice(["exact", "paper"]), help="Renderer [renderer.kind].")
 @click.option("--pixels", type=COUNT, help="Pixels across [renderer.pixels].")
 @click.option("--threshold", type=NON_NEGATIVE, help="Grey threshold, counts [renderer.threshold].")

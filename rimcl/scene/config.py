@@ -12,6 +12,7 @@ import numbers
 
 from rimcl.core.errors import RimclError
 from rimcl.fields.media import Fluid
+from rimcl.fields.sample import SAMPLE_LENGTH_M
 from rimcl.imaging.frames import Imaging
 from rimcl.imaging.mie import MieWeights
 from rimcl.imaging.render import Renderer
@@ -508,7 +509,9 @@ class MeasureConfig:
                 f_number=camera["f_number"],
                 distance=camera["distance"],
                 view_angle=camera["view_angle"],
-                length_m=field["length_m"],
+                length_m=field["length_m"]
+                if field["length_m"] is not None or field["path"]
+                else SAMPLE_LENGTH_M,
                 focal_length_mm=camera["focal_length_mm"],
                 magnification=camera["magnification"],
                 working_distance_mm=camera["working_distance_mm"],

@@ -305,10 +305,21 @@ def summary_markdown(stats, scene):
     first = cases[0]
     camera = scene["camera"]
     rays = (
-        f"plane camera, {camera['fan']}×{camera['fan']} rays per tracer"
+        f"plane camera (the paper's fan, NA ≈ 0.8), {camera['fan']}×{camera['fan']} rays per tracer"
         if camera["kind"] == "plane"
         else f"{camera['kind']} camera, {camera['pupil_rays']} rays per tracer"
     )
+    if camera["kind"] == "lens":
+        f_number = 8.0 if camera["f_number"] is None else camera["f_number"]
+        wall = camera["window_thickness_mm"]
+        rays = (
+            f"lens camera ({camera['focal_length_mm']:g} mm f/{f_number:g}"
+            + (f", M = {camera['magnification']:g}" if camera["magnification"] else "")
+            + f", {camera['sensor_pixels'][0]}×{camera['sensor_pixels'][1]} pixels of "
+            f"{camera['pixel_pitch_um']:g} µm, behind "
+            + (f"a {wall:g} mm wall" if wall else "the bare fluid/air interface")
+            + f"), {camera['pupil_rays']} rays per tracer"
+        )
     field = scene["field"]["path"] or "the shipped 64³ sample (buoyancy-driven mixing)"
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     devices = ", ".join(
@@ -318,8 +329,17 @@ def summary_markdown(stats, scene):
         f"# rimcl study: {len(cases)} cases",
         "",
         f"rimcl {__version__}, {stamp}. Field: {field}. {scene['tracers']['count']} tracers, "
-        f"{rays}, {scene['renderer']['kind']} renderer, {scene['renderer']['pixels']} pixels "
-        f"across the field of view (pixel = {first['pixel_size_over_L']:.3g} L), "
+        f"{rays}, {scene['renderer']['kind']} renderer, "
+        + (
+            f"{scene['renderer']['pixels']} pixels across the field of view "
+            if camera["kind"] != "lens"
+            else ""
+        )
+        + f"(pixel = {first['pixel_size_over_L']:.3g} L), Mie weights "
+        + ("on" if scene["mie"]["enabled"] else "off")
+        + ", sensor noise "
+        + ("on" if scene["sensor"]["noise"] else "off")
+        + f", {scene['renderer']['bit_depth']} bits, "
         f"L = {first['length_L']:.4g}, Δt = {first['dt']:.3g}.",
         f"Device: {devices}. Configuration: `scene.toml`; every number and the software "
         "versions: `stats.json`; figures with their data: `figures/`.",
