@@ -87,6 +87,12 @@ def _case_list(_ctx, _param, value):
     metavar="local:N|tcp://HOST:PORT",
     help="Measure on Dask: N worker processes here, or a running scheduler [run.scheduler].",
 )
+@click.option(
+    "--sensitivity",
+    is_flag=True,
+    help="Measure every case again with the threshold x1/2 and x2, the other interpolation "
+    "and 4x the rays: a sensitivity band per headline number [run.sensitivity].",
+)
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
 @handle_errors
 def study(
@@ -111,6 +117,7 @@ def study(
     step,
     device_spec,
     scheduler,
+    sensitivity,
     no_progress,
 ):
     """Run the whole chain (trace, render, centroid, track, statistics, figures) over the
@@ -145,6 +152,7 @@ def study(
         "run.engine": engine,
         "run.mode": mode,
         "run.scheduler": scheduler,
+        "run.sensitivity": sensitivity or None,  # a scene file may ask for it
     }
     scene = load_scene(scene_file, overrides, preset=preset)
     result = run_study(

@@ -47,6 +47,7 @@ from rimcl.stats.error_blocks import (
 )
 from rimcl.stats.peaks import discrete_mode, pdf_peak
 from rimcl.stats.render_file import OPTICS_COLUMNS, load_render
+from rimcl.stats.sensitivity import EXCLUDED_BY_OPTICS, bands, headline_values
 from rimcl.stats.summaries import CONDITION_FRACTION, finite_or_none
 from rimcl.stats.tables import NOTE_COLUMN, area_changes, flagged_tracers, rows_of, write_json
 
@@ -132,7 +133,8 @@ def case_statistics(tables):
         them), ``against_truth`` (the same groups against the truth, the paper's
         definition; see :data:`ERROR_DEFINITIONS`), ``baseline``, ``optics`` and
         ``imaging`` (where the file has the optics columns), ``budget_verdict``,
-        ``convergence``, ``area_change_peak``, ``circularity_peak``, ``rays``).
+        ``convergence``, ``sensitivity`` (:mod:`rimcl.stats.sensitivity`),
+        ``area_change_peak``, ``circularity_peak``, ``rays``).
     """
     excluded_ids, excluded_counts = flagged_tracers(tables)
     noted_ids, noted_counts = flagged_tracers(tables, NOTE_COLUMN)
@@ -190,6 +192,9 @@ def case_statistics(tables):
     case["circularity_peak"] = pdf_peak(tracers["circularity_meas"])
     case["convergence"] = convergence(tables, kept, blocks, refraction)
     case["budget_verdict"] = budget_verdict(case)
+    # the method's part of the uncertainty: here the variant that needs no measurement
+    variants = {EXCLUDED_BY_OPTICS: headline_values(tables, excluded_by_optics=True)}
+    case["sensitivity"] = {"variants": variants, "bands": bands(case, variants)}
     case["rays"] = {
         "n_rays": rays_total,
         "n_rays_ok": int(np.sum(tables.tracers["n_rays_ok"])),

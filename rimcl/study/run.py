@@ -372,6 +372,14 @@ def run_study(
             ran.append(name)
             say(f"{step}: done in {seconds[name]:.1f} s")
         scene_file.settle()
+        variant_files = {}
+        if scene["run"]["sensitivity"] and cases:
+            from rimcl.study.sensitivity import measure_variants
+
+            variant_files, measured = measure_variants(
+                scene, out_dir, cases, force=force, progress=progress, say=say
+            )
+            ran += [f"sensitivity/{name}" for name in measured]
         piv_files = []
         if mode != "ptv":
             from rimcl.piv.study import run_study_cases
@@ -390,7 +398,7 @@ def run_study(
                     out_dir, stats, ran, skipped, seconds, False, time.perf_counter() - started
                 )
         say("statistics and figures" if figures else "statistics")
-        stats = write_study_outputs(out_dir, scene, case_files, figures, piv_files)
+        stats = write_study_outputs(out_dir, scene, case_files, figures, piv_files, variant_files)
     return StudyResult(out_dir, stats, ran, skipped, seconds, True, time.perf_counter() - started)
 
 
@@ -444,9 +452,10 @@ def _numerics_case(scene, names):
     return next((name for name in names if name in CASES or name.startswith("G=")), None)
 
 
-def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
+def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=(), variant_files=None):
     """``stats.json``, the figures and ``summary.md`` (last) of finished case files
-    (PTV render files, PIV case files).
+    (PTV render files, PIV case files; ``variant_files``: the sensitivity variants'
+    render files, :func:`rimcl.study.sensitivity.measure_variants`).
 
     Returns
     -------
@@ -471,6 +480,10 @@ def write_study_outputs(out_dir, scene, case_files, figures=True, piv_files=()):
             all_tables.append(tables)
         all_tables = check_cases(all_tables)
         stats = compute_stats(all_tables, config=config)
+        if variant_files:
+            from rimcl.study.sensitivity import add_variants
+
+            add_variants(stats, variant_files)
         for case in stats["cases"]:
             case["physical_equivalent"] = physical_equivalents(case["delta_n_max"], scene)
         if figures:

@@ -243,6 +243,66 @@ def _convergence_lines(cases):
     return [*lines, ""]
 
 
+#: Headline numbers of the sensitivity table: (stats path, heading).
+SENSITIVITY_HEADINGS = (
+    ("position_error_median_over_L", "median |ε_x|/L"),
+    ("velocity.u3.rms_normalized", "u3 rms ratio"),
+    ("velocity_fit.u3.rms_normalized", "u3 fit rms ratio"),
+    ("acceleration.a3.rms_normalized", "a3 rms ratio"),
+    ("acceleration_fit.a3.rms_normalized", "a3 fit rms ratio"),
+)
+
+
+def _sensitivity_cell(band, path):
+    if band is None or band["value"] is None:
+        return "n/a"
+    scale, unit = (1.0, "") if "." not in path else (100.0, " %")
+    text = with_interval(band["value"], band["ci95"], scale, unit)
+    return f"{text}: **{band['text']}**" if band["text"] != "n/a" else text
+
+
+def _sensitivity_lines(cases, scene):
+    """Each headline number with its verdict against the settings' variants."""
+    with_bands = [case for case in cases if "sensitivity" in case]
+    if not with_bands:
+        return []
+    ran = sorted({name for case in with_bands for name in case["sensitivity"]["variants"]})
+    lines = [
+        "## Sensitivity to settings",
+        "",
+        "The bootstrap interval says how a number moves with the tracers; the settings a "
+        "user chooses move it too. Each headline number (refraction errors) under: "
+        + ", ".join(f"*{name}*" for name in ran)
+        + ". **stable**: every variant inside the 95 % interval; otherwise *depends on X by "
+        "Y %* names the variant that moves it most. *excluded by optics*: the tracers left "
+        "out (flagged) counted with their optics error. ",
+    ]
+    if not scene["run"]["sensitivity"]:
+        lines[-1] += (
+            "The threshold ×½ and ×2, the other interpolation and rays ×4 need the case "
+            "measured again (4 studies more): `rimcl study --sensitivity`."
+        )
+    else:
+        lines[-1] += (
+            "Threshold ×½ and ×2, the other interpolation (trilinear ↔ bspline3) and rays "
+            "×4: each case measured again (`sensitivity/<variant>/<case>.h5`); "
+            "`stats.json`: `sensitivity` per case."
+        )
+    lines.append("")
+    header = ["case", *(heading for _, heading in SENSITIVITY_HEADINGS)]
+    rows = [
+        [
+            case["name"],
+            *(
+                _sensitivity_cell(case["sensitivity"]["bands"].get(path), path)
+                for path, _ in SENSITIVITY_HEADINGS
+            ),
+        ]
+        for case in with_bands
+    ]
+    return [*lines, *_table(header, rows), ""]
+
+
 def _physical_lines(cases):
     """What each case's Δn_max means in air, water and salt water (DESIGN §16)."""
     if not all("physical_equivalent" in case for case in cases):
@@ -392,6 +452,7 @@ def summary_markdown(stats, scene):
         lines += [f"**{heading}**", "", *_table(header, _headline_rows(cases, group, component))]
         lines.append("")
     lines += _budget_lines(cases)
+    lines += _sensitivity_lines(cases, scene)
     lines += [
         "## The paper's statistics",
         "",
