@@ -56,14 +56,16 @@ def test_a_growing_statistic_is_marked(tmp_path, scene):
     write_render_file(path, n_tracers=40)
     stats = compute_stats([load_render(path)])
     case = stats["cases"][0]
-    case["convergence"]["not_converged"] = ["velocity.u3.random"]
+    case["convergence"]["not_converged"] = ["velocity.u3.random", "position_error_median_over_L"]
     text = summary_markdown(stats, scene)
+    position = table_rows(text, "C1")[0]
+    assert position[-1].endswith(" †") and not position[-2].endswith(" †")
     paper_row = table_rows(text, "C1")[-1]  # the paper's statistics come last
     random = with_interval(
         case["velocity"]["u3"]["random"], case["velocity"]["u3"]["ci95"]["random"], 100, " %"
     )
     assert any(cell.startswith(f"{random} †") for cell in paper_row)
-    assert "- C1: not converged: `velocity.u3.random`" in text
+    assert "- C1: not converged: `velocity.u3.random`, `position_error_median_over_L`" in text
     # beside it: its influence and its conditioned value
     share = significant(case["velocity"]["u3"]["influence"], 2)
     conditioned = case["velocity"]["u3"]["conditioned"]

@@ -23,6 +23,7 @@ DEFAULT_RAYS_PER_BATCH = 1 << 17  # rays traced per batch: ~40 MB of host memory
 DEFAULT_RAY_SAMPLE = 20_000
 ENGINES = ("device", "numpy")
 MAX_FRAMES = 1000
+DEFAULT_MAGNIFICATION = 0.2  # the lens camera's M when neither M nor the distance is given
 DEFAULT_PSF_SIGMA = 7.0  # the study's PSF (px) when neither the scene nor a lens sets one
 
 
@@ -113,8 +114,9 @@ class CameraConfig:
     def _lens(self, scene, medium_index):
         if self.length_m is None:
             raise RimclError(
-                "the lens camera needs the field's physical size: field.length_m "
-                "(metres per field length unit)"
+                "the lens camera (the default) needs the field's physical size: give "
+                "field.length_m (metres per field length unit), or use the paper's fan "
+                "(--preset paper or camera.kind = \"plane\"), which needs none"
             )
         # always a wall: thickness 0 is the bare fluid/air interface, which refracts too
         window = FlatWindow(
@@ -125,7 +127,10 @@ class CameraConfig:
             float(self.length_m),
             focal_length_mm=float(self.focal_length_mm),
             f_number=8.0 if self.f_number is None else float(self.f_number),
-            magnification=self.magnification,
+            # M = 0.2 unless the working distance sets it: the default camera's
+            magnification=self.magnification
+            if self.magnification is not None or self.working_distance_mm is not None
+            else DEFAULT_MAGNIFICATION,
             working_distance_mm=self.working_distance_mm,
             pixel_pitch_um=float(self.pixel_pitch_um),
             pixels=tuple(int(p) for p in self.sensor_pixels),

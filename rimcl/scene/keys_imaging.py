@@ -315,7 +315,7 @@ def imaging_keys():
             "magnification",
             None,
             "float",
-            "lens camera: magnification M (or working_distance_mm)",
+            "lens camera: magnification M (or working_distance_mm); default 0.2",
             positive=True,
             example=0.2,
         ),

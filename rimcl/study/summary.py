@@ -141,8 +141,12 @@ def _case_row(case, block=None):
         number(case["G"]),
         number(case["delta_n_max"]),
         f"{case['n_used']}/{case['n_tracers']}",
-        with_interval(
-            case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
+        _marked(
+            case,
+            "position_error_peak_over_L",
+            with_interval(
+                case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
+            ),
         ),
         _ratio_cell(case, f"{prefix}velocity.u3.systematic", velocity, "systematic"),
         _ratio_cell(case, f"{prefix}velocity.u3.random", velocity, "random"),
@@ -423,12 +427,21 @@ def summary_markdown(stats, scene):
             number(case["G"]),
             number(case["delta_n_max"]),
             f"{case['n_used']}/{case['n_tracers']}",
-            with_interval(
-                case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
+            _marked(
+                case,
+                "position_error_peak_over_L",
+                with_interval(
+                    case["position_error_peak_over_L"],
+                    case.get("position_error_peak_over_L_ci95"),
+                ),
             ),
-            with_interval(
-                case["position_error_median_over_L"],
-                case.get("position_error_median_over_L_ci95"),
+            _marked(
+                case,
+                "position_error_median_over_L",
+                with_interval(
+                    case["position_error_median_over_L"],
+                    case.get("position_error_median_over_L_ci95"),
+                ),
             ),
         ]
         for case in cases
