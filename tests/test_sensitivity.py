@@ -63,3 +63,30 @@ def test_variant_scenes_change_one_setting():
     assert changed["rays_x4"]["camera"]["pupil_rays"] == 4 * scene["camera"]["pupil_rays"]
     paper = load_scene(preset="paper")
     assert variant_scene(paper, "rays_x4")["camera"]["fan"] == 200
+
+
+def test_a_study_with_sensitivity_measures_every_variant(device, tmp_path):
+    from rimcl.scene.load import load_scene
+    from rimcl.study.run import run_study
+
+    overrides = {
+        "cases.names": ["C1"],
+        "tracers.count": 4,
+        "camera.fan": 3,
+        "renderer.pixels": 256,
+        "time.frames": 3,
+        "time.fit_window": 3,
+        "run.sensitivity": True,
+        "run.device": device.name,
+    }
+    result = run_study(load_scene(None, overrides), tmp_path, figures=False)
+    for _, directory in VARIANTS:
+        assert (tmp_path / "sensitivity" / directory / "cases" / "C1.h5").is_file()
+    (case,) = result.stats["cases"]
+    assert set(case["sensitivity"]["variants"]) == {EXCLUDED_BY_OPTICS, *(n for n, _ in VARIANTS)}
+    band = case["sensitivity"]["bands"]["velocity.u3.rms_normalized"]
+    assert set(band["relative"]) == set(case["sensitivity"]["variants"])
+    assert "Sensitivity to settings" in (tmp_path / "summary.md").read_text()
+    # a rerun keeps every variant's file
+    again = run_study(load_scene(None, overrides), tmp_path, figures=False)
+    assert again.ran == []

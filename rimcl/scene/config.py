@@ -116,7 +116,7 @@ class CameraConfig:
             raise RimclError(
                 "the lens camera (the default) needs the field's physical size: give "
                 "field.length_m (metres per field length unit), or use the paper's fan "
-                "(--preset paper or camera.kind = \"plane\"), which needs none"
+                '(--preset paper or camera.kind = "plane"), which needs none'
             )
         # always a wall: thickness 0 is the bare fluid/air interface, which refracts too
         window = FlatWindow(

@@ -3,7 +3,7 @@
 ``rimcl study --sensitivity`` (scene key ``run.sensitivity``) measures every case four more
 times, each with one setting a user could reasonably choose differently: the threshold
 halved and doubled, the other interpolation (trilinear ↔ bspline3) and four times the rays
-per tracer. The render files go to ``sensitivity/<variant>/<case>.h5`` (kept between runs
+per tracer. The render files go to ``sensitivity/<variant>/cases/<case>.h5`` (kept between runs
 like the cases'); their headline numbers (:func:`rimcl.stats.sensitivity.headline_values`)
 join the case's ``sensitivity`` entry in ``stats.json`` beside the variant every study
 computes (the excluded tracers counted by their optics error), and the verdicts are made
@@ -73,7 +73,7 @@ def measure_variants(scene, out_dir, cases, force=False, progress=False, say=Non
     for name, directory in VARIANTS:
         changed = variant_scene(scene, directory)
         folder = out_dir / "sensitivity" / directory
-        folder.mkdir(parents=True, exist_ok=True)
+        case_path(folder, "any").parent.mkdir(parents=True, exist_ok=True)
         references = []
         files[name] = {}
         for case_name, case in cases:

@@ -12,6 +12,7 @@ import math
 from datetime import datetime, timezone
 
 from rimcl import __version__
+from rimcl.stats.summaries import INFLUENCE_LIMIT
 
 PAPER_SOURCE = (
     "H. Li, A. Fischer, M. Avila, D. Xu, *Measurement error of tracer-based velocimetry in "
@@ -121,6 +122,8 @@ def _ratio_cell(case, path, summary, key):
     carried by the 3 largest rows) and its conditioned value beside it."""
     text = _marked(case, path, _percent_of(summary, key))
     share = summary.get("influence")
+    if share is not None and share > INFLUENCE_LIMIT and not text.endswith(NOT_CONVERGED):
+        text += f" {NOT_CONVERGED}"  # carried by a few rows, also where not followed over N
     conditioned = summary.get("conditioned")
     extras = []
     if share is not None:
@@ -289,7 +292,7 @@ def _sensitivity_lines(cases, scene):
     else:
         lines[-1] += (
             "Threshold ×½ and ×2, the other interpolation (trilinear ↔ bspline3) and rays "
-            "×4: each case measured again (`sensitivity/<variant>/<case>.h5`); "
+            "×4: each case measured again (`sensitivity/<variant>/cases/<case>.h5`); "
             "`stats.json`: `sensitivity` per case."
         )
     lines.append("")
@@ -393,13 +396,13 @@ def summary_markdown(stats, scene):
         f"# rimcl study: {len(cases)} cases",
         "",
         f"rimcl {__version__}, {stamp}. Field: {field}. {scene['tracers']['count']} tracers, "
-        f"{rays}, {scene['renderer']['kind']} renderer, "
+        f"{rays}, {scene['renderer']['kind']} renderer"
         + (
-            f"{scene['renderer']['pixels']} pixels across the field of view "
+            f", {scene['renderer']['pixels']} pixels across the field of view"
             if camera["kind"] != "lens"
             else ""
         )
-        + f"(pixel = {first['pixel_size_over_L']:.3g} L), Mie weights "
+        + f" (pixel = {first['pixel_size_over_L']:.3g} L), Mie weights "
         + ("on" if scene["mie"]["enabled"] else "off")
         + ", sensor noise "
         + ("on" if scene["sensor"]["noise"] else "off")
