@@ -72,6 +72,7 @@ def draw_convergence(cases):
                 series.append(
                     {
                         "label": case_label(case),
+                        "case": case["name"],
                         "statistic": statistic,
                         "n_tracers": list(ns),
                         "value": [v * full for v in ratios],
@@ -88,7 +89,7 @@ def draw_convergence(cases):
         ax.set_ylabel(f"value / value at N, {component}")
         ax.grid(True, which="major", alpha=0.3)
         letter = next(letters)
-        flagged = sorted({s["label"] for s in series if s["not_converged"]})
+        flagged = list(dict.fromkeys(s["case"] for s in series if s["not_converged"]))
         note = f"; not converged: {', '.join(flagged)}" if flagged else ""
         panel_title(ax, letter, f"{component}, {descriptions[group]}{note}", fontsize=8)
         panels[letter] = {"group": group, "series": series}

@@ -34,7 +34,7 @@ LITERATURE_STUDIES = (
 
 def draw_ray_deflection(all_tables, cases):
     figure = Figure(figsize=(10.0, 7.4), dpi=120, layout="constrained")
-    ax, ax_studies = figure.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1.3]})
+    ax, ax_studies = figure.subplots(2, 1, gridspec_kw={"height_ratios": [3, 1.3]})
     panel = {"x": "|N| L", "y": "|Δθ| (rad)", "series": [], "literature": []}
     lows, highs = [], []
     groups = (
@@ -102,7 +102,10 @@ def draw_ray_deflection(all_tables, cases):
         )
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax_studies.set_xlabel("|N| L (path-averaged transverse ∇n/n times slab depth L)")
+    ax_studies.set_xscale("log")
+    ax_studies.set_xlim(ax.get_xlim())  # the same |N| L axis as (a)
+    ax.set_xlabel("|N| L (path-averaged transverse ∇n/n times slab depth L)")
+    ax_studies.set_xlabel("|N| L ≈ Δn_max / n (the same axis as (a))")
     ax.set_ylabel("ray deflection |Δθ| (rad)")
     panel_title(ax, "a", "Ray deflection (frame-0 ray sample, rays with status ok)", fontsize=8)
     ax_studies.set_ylim(0.3, len(LITERATURE_STUDIES) + 0.7)

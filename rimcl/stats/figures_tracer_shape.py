@@ -115,7 +115,7 @@ def draw_tracer_shape(all_tables, cases):
             )
         ax.set_yscale("log")
         ax.xaxis.set_major_locator(MaxNLocator(5))
-        ax.set_xlabel("circularity C = P² / (4π A') (dashed: the undistorted image's median)")
+        ax.set_xlabel("circularity C = P²/(4πA'); dashed: undistorted")
         ax.set_ylabel("PDF")
         ax.grid(True, which="major", alpha=0.3)
         ax.legend(fontsize=6)
