@@ -317,3 +317,17 @@ def test_dt_sweep_finds_where_refraction_dominates(study, tmp_path):
     written = write_dt_sweep_figure(sweep, tmp_path / "sweep")
     assert (tmp_path / "sweep" / "dt_sweep.png").exists()
     assert written["dt"] == [0.005, 0.02, 0.08]
+
+
+def test_circularity_of_images_of_a_few_pixels_is_not_drawn(tmp_path):
+    path = tmp_path / "c1.h5"
+    write_render_file(path, n_tracers=30)
+    with h5py.File(path, "a") as h5:
+        h5["tracers/area_ref"][...] = 4.0
+        h5["tracers/area_meas"][...] = 4.0 + (np.arange(h5["tracers/area_meas"].size) % 2)
+    tables = [load_render(path)]
+    figure, data = draw_figure("tracer_shape", tables, compute_stats(tables))
+    assert data["panels"]["b"] == {"not_drawn": True, "median_area_px": 4.0}
+    titles = [" ".join(ax.get_title(loc="left").split()) for ax in figure.axes]
+    assert any("whole pixels, ΔA/A moves in steps of 0.25" in t for t in titles)
+    assert layout_problems(figure) == []

@@ -16,6 +16,9 @@ from rimcl.stats.tables import area_changes, kept_rows
 
 #: Cases whose spreads of ΔA/A differ by more than this factor get separate axes.
 REGIME_SPREAD_RATIO = 20.0
+#: Smallest median reference image area (px²) whose circularity describes a shape: the
+#: perimeter of a blob of a few whole pixels is a pixel count (a 2 x 2 blob gives 0.32).
+SHAPE_MIN_AREA_PX = 20.0
 
 
 def _shape_regimes(changes):
@@ -89,6 +92,26 @@ def draw_tracer_shape(all_tables, cases):
         panels[letter] = {"bin_edges": edges.tolist(), "series": series}
     for col, (regime, members) in enumerate(regimes):
         ax = axes[1, col]
+        letter = next(letters)
+        area_ref = np.concatenate([kept[i]["area_ref"] for i in members])
+        area_ref = area_ref[area_ref > 0]
+        typical = float(np.median(area_ref)) if area_ref.size else 0.0
+        if typical < SHAPE_MIN_AREA_PX:
+            ax.set_axis_off()
+            ax.text(
+                0.5,
+                0.5,
+                f"({letter}) circularity not drawn: the images cover about {typical:.3g} px², "
+                "and the perimeter of a blob of a few whole pixels is a pixel count, not a "
+                f"shape (below {SHAPE_MIN_AREA_PX:g} px²)",
+                ha="center",
+                va="center",
+                wrap=True,
+                fontsize=8,
+                transform=ax.transAxes,
+            )
+            panels[letter] = {"not_drawn": True, "median_area_px": typical}
+            continue
         series = []
         samples = [kept[i]["circularity_meas"] for i in members]
         references = np.concatenate([kept[i]["circularity_ref"] for i in members])
@@ -119,7 +142,6 @@ def draw_tracer_shape(all_tables, cases):
         ax.set_ylabel("PDF")
         ax.grid(True, which="major", alpha=0.3)
         ax.legend(fontsize=6)
-        letter = next(letters)
         panel_title(ax, letter, f"circularity, {regime}")
         panels[letter] = {
             "bin_edges": edges.tolist(),
