@@ -34,6 +34,8 @@ HEADLINES = (
 
 #: The variant computed from the case's own file.
 EXCLUDED_BY_OPTICS = "excluded by optics"
+#: The variants that measure the case again (:mod:`rimcl.study.sensitivity`).
+MEASURED_VARIANTS = ("threshold ×½", "threshold ×2", "the other interpolation", "rays ×4")
 
 
 def _rms_ratio(error, truth):
@@ -133,8 +135,9 @@ def bands(case, variants):
     dict of str to dict
         Per headline path: ``value``, ``ci95``, ``variants`` (``{name: value}``),
         ``relative`` (``{name: value / headline - 1}``), ``stable`` (every variant inside
-        the interval; None without variants or value) and ``text`` ("stable", "depends
-        on X by +Y %", or "n/a").
+        the interval; None without variants or value) and ``text`` ("stable"; "stable
+        against X" while some of the :data:`MEASURED_VARIANTS` were not run; "depends on
+        X by +Y %"; or "n/a").
     """
     result = {}
     for path, _, _ in HEADLINES:
@@ -152,7 +155,8 @@ def bands(case, variants):
         )
         entry["stable"] = bool(inside)
         if inside:
-            entry["text"] = "stable"
+            missing = [name for name in MEASURED_VARIANTS if name not in found]
+            entry["text"] = "stable" if not missing else f"stable against {', '.join(found)}"
         else:
             name = max(entry["relative"], key=lambda k: abs(entry["relative"][k]))
             entry["text"] = f"depends on {name} by {100 * entry['relative'][name]:+.0f} %"

@@ -12,14 +12,16 @@ again (:func:`rimcl.stats.sensitivity.bands`). Each variant costs about one stud
 
 import copy
 
+from rimcl.stats.sensitivity import MEASURED_VARIANTS
 from rimcl.study.case_files import case_path, check_case_file
 
 #: The variants: (name in stats.json and summary.md, directory).
-VARIANTS = (
-    ("threshold ×½", "threshold_half"),
-    ("threshold ×2", "threshold_double"),
-    ("the other interpolation", "interpolation"),
-    ("rays ×4", "rays_x4"),
+VARIANTS = tuple(
+    zip(
+        MEASURED_VARIANTS,
+        ("threshold_half", "threshold_double", "interpolation", "rays_x4"),
+        strict=True,
+    )
 )
 
 

@@ -280,9 +280,10 @@ def _sensitivity_lines(cases, scene):
         "The bootstrap interval says how a number moves with the tracers; the settings a "
         "user chooses move it too. Each headline number (refraction errors) under: "
         + ", ".join(f"*{name}*" for name in ran)
-        + ". **stable**: every variant inside the 95 % interval; otherwise *depends on X by "
-        "Y %* names the variant that moves it most. *excluded by optics*: the tracers left "
-        "out (flagged) counted with their optics error. ",
+        + ". **stable**: every variant inside the 95 % interval (*stable against X*: only "
+        "X was tried); otherwise *depends on X by Y %* names the variant that moves it "
+        "most. *excluded by optics*: the tracers left out (flagged) counted with their "
+        "optics error. ",
     ]
     if not scene["run"]["sensitivity"]:
         lines[-1] += (
