@@ -21,10 +21,12 @@
  *   1 pupil camera (a ray is collected if its straight continuation passes the pupil;
  *     also a lens camera without a window: its pupil on the x1 axis, its image points
  *     back-projected onto the sheet, which is its focus plane),
- *   2 lens camera behind a flat window (rimcl.camera.LensCamera with a FlatWindow):
- *     directions solved to reach the pupil points through fluid, glass and outside
- *     medium; exit rays refracted at both window faces, tested against the pupil and
- *     back-projected onto the focus plane x1 = focus_x1.
+ *   2 lens camera behind a flat window (rimcl.camera.LensCamera with a FlatWindow, of
+ *     thickness 0 for the bare fluid/air interface): directions solved to reach the pupil
+ *     points through fluid (the camera's mean index), glass and outside medium; exit rays
+ *     refracted at both window faces with the ray's own index at its exit point (|T|, or
+ *     straight_index for a uniform field), tested against the pupil and back-projected
+ *     onto the focus plane x1 = focus_x1.
  * Optional: RIMCL_MIE (rimcl_mie.h): 0 (default) every ray weighs 1 and ray_weight is not
  *   written; otherwise each ray's Mie weight from its initial direction goes to ray_weight.
  *   RIMCL_STRAIGHT: 1 for a uniform field (the reference medium, G = 0): no trace, each
@@ -75,12 +77,14 @@
 #define CAM_PUPIL_RADIUS 10
 /* lens behind a window (RIMCL_CAMERA 2), as rimcl/optics/camera.py LensCamera computes them: */
 #define CAM_WINDOW_DEPTHS 11 /* x1 runs in fluid, glass (the thickness), outside to the pupil */
-#define CAM_WINDOW_RATIOS 14 /* sine ratios 1, n_fluid / n_glass, n_fluid / n_outside */
+#define CAM_WINDOW_RATIOS 14 /* sine ratios 1, n_fluid / n_glass, n_fluid / n_outside (aiming) */
 #define CAM_WINDOW_SLOPES 17 /* depths * ratios, per medium */
 #define CAM_WINDOW_TOTAL 20 /* their sum: the paraxial run per unit sine */
 #define CAM_WINDOW_CAP 21 /* 0.999 / max(ratios): the largest starting sine */
 #define CAM_FOCUS_X1 22 /* the plane the lens is focused on */
-#define CAM_COUNT 23
+#define CAM_GLASS_INDEX 23 /* the window's index */
+#define CAM_OUTSIDE_INDEX 24 /* the index between window and lens */
+#define CAM_COUNT 25
 
 /* Newton steps of LensCamera.directions */
 #define LENS_NEWTON_STEPS 50
@@ -166,13 +170,15 @@ RIMCL_INLINE void refract_x1(const double *dir, const double ratio, double *out)
     out[2] = isnan(normal) ? NAN : t3;
 }
 
-/* The exit ray after the window, as LensCamera.through_window: its point on the outer
- * face (`pos`) and its unit direction outside (`dir`), NaN if reflected totally. */
-RIMCL_INLINE void through_window(__constant const double *camera, double *pos, double *dir)
+/* The exit ray after the window, as LensCamera.through_window with the ray's own index
+ * at its exit point (`exit_index`): its point on the outer face (`pos`) and its unit
+ * direction outside (`dir`), NaN if reflected totally. */
+RIMCL_INLINE void through_window(__constant const double *camera, const double exit_index,
+                                 double *pos, double *dir)
 {
     double glass[3], outside[3];
-    refract_x1(dir, camera[CAM_WINDOW_RATIOS + 1], glass);
-    refract_x1(dir, camera[CAM_WINDOW_RATIOS + 2], outside);
+    refract_x1(dir, exit_index / camera[CAM_GLASS_INDEX], glass);
+    refract_x1(dir, exit_index / camera[CAM_OUTSIDE_INDEX], outside);
     const double run = camera[CAM_WINDOW_DEPTHS + 1] / glass[0];
     for (int q = 0; q < 3; ++q) {
         pos[q] = pos[q] + run * glass[q];
@@ -229,7 +235,8 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
                         __global float *sample_out, __global int4 *sample_info,
                         __global const double *mie, const int mie_terms,
                         __global double *ray_weight, const double x_end_exact,
-                        const double max_length, const double4 box23)
+                        const double max_length, const double4 box23,
+                        const double straight_index)
 {
     const int first = get_global_id(0) * RIMCL_LANES;
     if (first >= n_rays)
@@ -312,6 +319,7 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
         double end[3], dir[3];
 #if RIMCL_STRAIGHT
         int status, steps = 0;
+        const double exit_index = straight_index; /* a uniform field's index */
         {
             /* rimcl.trace.straight_rays, the same float64 operations, none fused */
 #pragma OPENCL FP_CONTRACT OFF
@@ -335,6 +343,7 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
         (void)x_end_exact;
         (void)max_length;
         (void)box23;
+        (void)straight_index;
         /* the exit record as trace.cl writes it, joined in float64 as the host joins it */
         float record[RAY_OUT_STRIDE];
         int4 info;
@@ -345,18 +354,20 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
             end[q] = (double)record[q] + (double)record[3 + q];
             tangent[q] = (double)record[6 + q] + (double)record[9 + q];
         }
-        const double length = norm3(tangent[0], tangent[1], tangent[2]);
+        /* |T| = n at the exit point (T = n dR/ds): the index Snell takes at the wall */
+        const double exit_index = norm3(tangent[0], tangent[1], tangent[2]);
         for (int q = 0; q < 3; ++q)
-            dir[q] = tangent[q] / length;
+            dir[q] = tangent[q] / exit_index;
 #endif
 #if RIMCL_CAMERA == 2
         /* through the window; back-projection onto the focus plane (LensCamera.image_points) */
-        through_window(camera, end, dir);
+        through_window(camera, exit_index, end, dir);
         const double focus_x1 = camera[CAM_FOCUS_X1];
 #elif RIMCL_IMAGE_PLANE == 1
         /* back-projection to the tracer's own plane (rimcl.trace_rays' image_pos) */
         const double focus_x1 = lane_x1[k];
 #else
+        (void)exit_index;
         /* back-projection to the sheet (the ideal lens focused on it) */
         const double focus_x1 = x_sheet;
 #endif

@@ -65,10 +65,13 @@ def _case_list(_ctx, _param, value):
 @click.option("--seed", type=INDEX, help="Random seed [tracers.seed].")
 @click.option(
     "--camera",
-    type=click.Choice(["plane", "pupil", "lens"]),
-    help="Camera model [camera.kind]; lens needs field.length_m (scene or field file).",
+    type=click.Choice(["lens", "plane", "pupil"]),
+    help="Camera model [camera.kind]; lens needs field.length_m (scene or field file; the "
+    "shipped sample has one).",
 )
-@click.option("--fan", type=COUNT, help="Plane camera rays per side [camera.fan].")
+@click.option(
+    "--fan", type=COUNT, help="Plane camera rays per side [camera.fan]; alone: the plane camera."
+)
 @click.option("--renderer", type=click.Choice(["exact", "paper"]), help="Renderer [renderer.kind].")
 @click.option("--pixels", type=COUNT, help="Pixels across [renderer.pixels].")
 @click.option("--threshold", type=NON_NEGATIVE, help="Grey threshold, counts [renderer.threshold].")
@@ -83,6 +86,12 @@ def _case_list(_ctx, _param, value):
     "--scheduler",
     metavar="local:N|tcp://HOST:PORT",
     help="Measure on Dask: N worker processes here, or a running scheduler [run.scheduler].",
+)
+@click.option(
+    "--sensitivity",
+    is_flag=True,
+    help="Measure every case again with the threshold x1/2 and x2, the other interpolation "
+    "and 4x the rays: a sensitivity band per headline number [run.sensitivity].",
 )
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
 @handle_errors
@@ -108,6 +117,7 @@ def study(
     step,
     device_spec,
     scheduler,
+    sensitivity,
     no_progress,
 ):
     """Run the whole chain (trace, render, centroid, track, statistics, figures) over the
@@ -139,6 +149,7 @@ def study(
         "run.engine": engine,
         "run.mode": mode,
         "run.scheduler": scheduler,
+        "run.sensitivity": sensitivity or None,  # a scene file may ask for it
     }
     study = StudyConfig.from_scene(
         command_scene(scene_file, scene_option, overrides, preset=preset)

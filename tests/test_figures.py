@@ -163,11 +163,14 @@ def test_relative_error_histograms_are_normalised_pdfs(study):
     tables, stats, _ = study
     _, data = draw_figure("velocity_error", tables, stats)
     panel = data["panels"]["a"]
-    widths = np.diff(panel["bin_edges"])
+    # densities of log10 |ε/truth| on log bins: no gap at zero, each integrates to 1
+    widths = np.diff(np.log10(panel["bin_edges"]))
     zero_case, air, water = panel["series"]
     assert zero_case["exactly_zero"] and zero_case["pdf"] == []
+    assert zero_case["n_zero"] == zero_case["n"] > 0
     for series in (air, water):
         assert np.sum(np.asarray(series["pdf"]) * widths) == pytest.approx(1.0, rel=1e-12)
+        assert series["n_zero"] == 0
     random_panel = data["panels"]["f"]
     u3 = next(s for s in random_panel if s["label"] == "u3: std(ε/u3)")
     assert u3["value"] == [case["velocity"]["u3"]["random"] for case in stats["cases"][1:]]
@@ -183,14 +186,30 @@ def test_angles_to_the_reference_and_to_the_truth(study):
     np.testing.assert_allclose(air["ref"]["pdf_log10"], air["true"]["pdf_log10"], rtol=1e-6)
 
 
-def test_acceleration_figure_uses_the_fit_when_the_files_have_it(study):
+def test_acceleration_figure_uses_the_estimator_of_the_papers_table(study):
     tables, stats, _ = study
     figure, data = draw_figure("acceleration_error", tables, stats)
-    assert "polynomial fit" in figure._suptitle.get_text()
-    rms = next(s for s in data["panels"]["g"] if s["label"].startswith("a3"))
-    assert rms["value"] == [
-        c["acceleration_fit"]["a3"]["rms_normalized"] for c in stats["cases"][1:]
-    ]
+    assert "three-point differences" in figure._suptitle.get_text()
+    for letter, key in (("e", "systematic"), ("f", "random"), ("g", "rms_normalized")):
+        series = next(s for s in data["panels"][letter] if s["label"].startswith("a3"))
+        assert series["value"] == [c["acceleration"]["a3"][key] for c in stats["cases"][1:]]
+
+
+def test_maps_draw_each_value_at_its_own_frame(tmp_path):
+    path = tmp_path / "c1.h5"
+    write_render_file(path, n_tracers=30)
+    with h5py.File(path, "a") as h5:
+        h5["acceleration/frame"] = np.ones(30, dtype=np.int64)  # the three-point middle frame
+        ids, frames = h5["tracers/id"][()], h5["tracers/frame"][()]
+        x2 = h5["tracers/x2_true"][()]
+    tables = [load_render(path)]
+    _, data = draw_figure("maps", tables, compute_stats(tables))
+    acceleration = data["panels"]["a3 truth"]
+    expected = {int(i): x for i, f, x in zip(ids, frames, x2, strict=True) if f == 1}
+    assert acceleration["x2"] == [expected[i] for i in acceleration["id"]]
+    velocity = data["panels"]["u3 truth"]
+    first = {int(i): x for i, f, x in zip(ids, frames, x2, strict=True) if f == 0}
+    assert velocity["x2"] == [first[i] for i in velocity["id"]]
 
 
 def test_budget_figure_draws_the_four_parts_and_the_verdicts(study):
@@ -214,11 +233,13 @@ def test_convergence_figure_draws_each_subsample(study):
     tables, stats, _ = study
     _, data = draw_figure("convergence", tables, stats)
     first = data["panels"]["a"]
-    assert first["group"] == "velocity" and first["statistic"] == "random"
-    air = first["series"][0]
+    assert first["group"] == "velocity" and len(data["panels"]) == 4  # one per quantity
+    air = next(e for e in first["series"] if e["statistic"] == "random")
     convergence = stats["cases"][1]["convergence"]
+    values = convergence["velocity"]["u3"]["random"]["value"]
     assert air["n_tracers"] == convergence["n_tracers"]
-    assert air["value"] == convergence["velocity"]["u3"]["random"]["value"]
+    np.testing.assert_allclose(air["value"], values, rtol=1e-12)
+    np.testing.assert_allclose(air["relative_to_n"], np.asarray(values) / values[-1], rtol=1e-12)
 
 
 def test_deflection_figure_marks_the_literature_and_the_incidence_split(study):
@@ -320,3 +341,17 @@ def test_position_error_axes_carry_micrometres_where_the_scene_gives_the_size(st
         forward, inverse = axis._functions
         assert forward(1e-3) == pytest.approx(1e-3 * tables[0].length * 0.01 * 1e6)
         assert inverse(forward(2e-4)) == pytest.approx(2e-4)
+
+
+def test_circularity_of_images_of_a_few_pixels_is_not_drawn(tmp_path):
+    path = tmp_path / "c1.h5"
+    write_render_file(path, n_tracers=30)
+    with h5py.File(path, "a") as h5:
+        h5["tracers/area_ref"][...] = 4.0
+        h5["tracers/area_meas"][...] = 4.0 + (np.arange(h5["tracers/area_meas"].size) % 2)
+    tables = [load_render(path)]
+    figure, data = draw_figure("tracer_shape", tables, compute_stats(tables))
+    assert data["panels"]["b"] == {"not_drawn": True, "median_area_px": 4.0}
+    titles = [" ".join(ax.get_title(loc="left").split()) for ax in figure.axes]
+    assert any("whole pixels, ΔA/A moves in steps of 0.25" in t for t in titles)
+    assert layout_problems(figure) == []

@@ -12,7 +12,7 @@ from rimcl.stats.convergence import CONVERGENCE_SEED, not_converged
 from rimcl.stats.document import case_statistics, run_stats
 from rimcl.stats.peaks import pdf_peak
 from rimcl.stats.render_file import load_render
-from rimcl.stats.summaries import error_summary
+from rimcl.stats.summaries import INFLUENCE_LIMIT, error_summary
 
 
 def rms_ratio(error, truth):
@@ -91,12 +91,39 @@ def test_conditioned_summary_keeps_truths_above_half_their_rms():
 
 
 def test_not_converged_criterion():
-    grow = [0.1, 0.2, 0.4, 0.8, 1.6]
-    intervals = [[0.05, 0.2], [0.1, 0.3], [0.3, 0.6], [0.6, 1.0], [1.2, 2.0]]
-    assert not_converged(grow, intervals)
-    assert not not_converged([0.4, 0.5, 0.45, 0.5, 0.55], intervals)  # inside the N/4 interval
-    assert not not_converged([0.1, 0.2, 0.4, 0.9, 0.8], intervals)  # not growing at the end
-    assert not not_converged([0.1, 0.2, None, 0.8, 1.6], intervals)  # undefined at N/4
+    intervals = [[0.05, 0.2], [0.1, 0.3], [0.3, 0.6], [0.4, 0.7], [0.45, 0.65]]
+    assert not not_converged([0.1, 0.2, 0.45, 0.5, 0.55], intervals)  # inside both
+    assert not_converged([0.1, 0.2, 0.4, 0.8, 1.6], intervals)  # grows out of both
+    assert not_converged([0.1, 0.2, 0.4, 0.5, 0.35], intervals)  # below the N/2 one only
+    assert not_converged([0.1, 0.2, 0.4, 0.5, 0.65], intervals)  # above the N/4 one only
+    assert not_converged([0.1, 0.2, None, 0.5, 10.8], [*intervals[:2], None, *intervals[3:]])
+    assert not not_converged([0.1, 0.2, 0.4, 0.5, None], intervals)  # nothing at N
+
+
+def test_a_hidden_row_of_near_zero_truth_is_flagged(tmp_path):
+    """One tracer of |u3| = 1e-4 rms, in the full sample only: the paper's C1 a3 case."""
+    path = tmp_path / "hidden.h5"
+    n_tracers = 400
+    write_render_file(path, n_tracers=n_tracers)
+    order = np.random.default_rng(CONVERGENCE_SEED).permutation(np.arange(n_tracers))
+    rng = np.random.default_rng(3)
+    truth = rng.standard_normal(n_tracers)
+    truth[order[-1]] = 1e-4 * np.sqrt(np.mean(truth**2))  # enters at N, not before
+    error = 0.05 * rng.standard_normal(n_tracers)
+    with h5py.File(path, "a") as h5:
+        h5["velocity/u3_true"][...] = truth
+        h5["velocity/u3_ref"][...] = truth
+        h5["velocity/u3_meas"][...] = truth + error
+    case = case_statistics(load_render(path))
+    convergence = case["convergence"]
+    assert "velocity.u3.random" in convergence["not_converged"]
+    assert convergence["reasons"]["velocity.u3.random"] == ["jump", "few rows"]
+    assert case["velocity"]["u3"]["influence"] > 0.99
+    # the conditioned version leaves the row out: bounded, carried by no one row
+    conditioned = case["velocity"]["u3"]["conditioned"]
+    assert conditioned["influence"] < INFLUENCE_LIMIT
+    assert "velocity.u3.conditioned_random" not in convergence["not_converged"]
+    assert conditioned["random"] < 0.2 < case["velocity"]["u3"]["random"]
 
 
 def slow_tracers_enter_late(path, n_tracers):

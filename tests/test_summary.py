@@ -57,14 +57,43 @@ def test_a_growing_statistic_is_marked(tmp_path, scene):
     write_render_file(path, n_tracers=40)
     stats = compute_stats([load_render(path)])
     case = stats["cases"][0]
-    case["convergence"]["not_converged"] = ["velocity.u3.random"]
+    case["convergence"]["not_converged"] = ["velocity.u3.random", "position_error_median_over_L"]
     text = summary_markdown(stats, scene)
+    position = table_rows(text, "C1")[0]
+    assert position[-1].endswith(" †") and not position[-2].endswith(" †")
     paper_row = table_rows(text, "C1")[-1]  # the paper's statistics come last
     random = with_interval(
         case["velocity"]["u3"]["random"], case["velocity"]["u3"]["ci95"]["random"], 100, " %"
     )
-    assert f"{random} †" in paper_row
-    assert "- C1: not converged: `velocity.u3.random`" in text
+    assert any(cell.startswith(f"{random} †") for cell in paper_row)
+    assert "- C1: not converged: `velocity.u3.random`, `position_error_median_over_L`" in text
+    # beside it: its influence and its conditioned value
+    share = significant(case["velocity"]["u3"]["influence"], 2)
+    conditioned = case["velocity"]["u3"]["conditioned"]
+    assert (
+        f"{random} † (top-3 share {share}; conditioned "
+        f"{with_interval(conditioned['random'], conditioned['ci95']['random'], 100, ' %')})"
+    ) in paper_row
+
+
+def test_the_paper_table_gives_both_error_definitions(tmp_path, scene):
+    path = tmp_path / "c1.h5"
+    write_render_file(path, n_tracers=40)
+    stats = compute_stats([load_render(path)])
+    case = stats["cases"][0]
+    assert set(stats["config"]["error_definitions"]) == {"refraction", "against_truth", "baseline"}
+    truth = case["against_truth"]["velocity"]["u3"]
+    refraction = case["velocity"]["u3"]
+    assert truth["rms_normalized"] != refraction["rms_normalized"]
+    text = summary_markdown(stats, scene)
+    (vs_truth,) = table_rows(text, "rimcl, C1, vs truth (the paper's ε)")
+    assert vs_truth[3].startswith(
+        with_interval(truth["systematic"], truth["ci95"]["systematic"], 100, " %")
+    )
+    (vs_reference,) = table_rows(text, "rimcl, C1, vs reference (refraction)")
+    assert vs_reference[3].startswith(
+        with_interval(refraction["systematic"], refraction["ci95"]["systematic"], 100, " %")
+    )
 
 
 def test_empty_samples_read_n_a(tmp_path, scene):

@@ -14,6 +14,9 @@ from rimcl.core.errors import RimclError
 
 #: File name of the shipped sample inside the ``rimcl.samples`` package.
 SAMPLE_NAME = "mixing64.h5"
+#: Metres per field length unit of the shipped sample as the default scene sees it: its 2π
+#: box is the field of view of a 2048-px sensor of 6.5 µm pixels at M = 0.2 (66.6 mm).
+SAMPLE_LENGTH_M = 2048 * 6.5e-6 / 0.2 / (2 * 3.141592653589793)
 
 
 def sample_path():

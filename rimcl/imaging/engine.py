@@ -49,7 +49,7 @@ from rimcl.optics.trace import (
     prepare_launch,
 )
 
-_CAM_COUNT = 23  # camera block of cl/fan.cl (CAM_* there)
+_CAM_COUNT = 25  # camera block of cl/fan.cl (CAM_* there)
 #: Work-group size of the fan kernel: fixed, so that PoCL compiles its work-group function
 #: once (it specialises kernels per local size) and the last, smaller batch reuses it.
 FAN_GROUP = 64
@@ -232,6 +232,8 @@ class FanStage:
             block[20] = np.sum(depths * ratios)
             block[21] = 0.999 / ratios.max()
             block[22] = camera.focus_x1
+            block[23] = window.glass_index
+            block[24] = window.outside_index
         return block
 
     def kernel(self, field, trace_options, positions, name="trace_fan"):
@@ -293,6 +295,7 @@ class FanStage:
             cl.cltypes.make_double4(
                 field.box_lo[1], field.box_hi[1], field.box_lo[2], field.box_hi[2]
             ),
+            np.float64(field.n_ref),  # the exit index of its straight rays
         )
         kernel = get_kernel(build_program(context_for(device), "fan.cl", defines), name)
         return kernel, launch, plan
@@ -572,7 +575,7 @@ class DeviceEngine:
             origins, directions = _validate_rays(origins, directions)
             out, info = job.host["sample_out"], job.host["sample_info"]
             rows = _finish(origins, directions, out, info, context.plan.step, {})
-        collected = rows.ok & self.camera.collected(rows.end_pos, rows.end_dir)
+        collected = rows.ok & self.camera.collected(rows.end_pos, rows.end_dir, rows.exit_index)
         context.sampler.keep(
             (self.first_tracer + int(job.ids[0])) * self.rays + local, rows, collected
         )

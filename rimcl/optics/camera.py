@@ -225,8 +225,11 @@ class PlaneCamera:
         """
         return _toward(self.aim_points(), self.scene.in_sheet(tracers), aim_index)
 
-    def collected(self, end_pos, end_dir):
-        """Which exit rays the camera records: all of them. Shape (K,) bool."""
+    def collected(self, end_pos, end_dir, exit_index=None):
+        """Which exit rays the camera records: all of them. Shape (K,) bool.
+
+        ``exit_index`` is accepted for a common signature with :class:`LensCamera`.
+        """
         return np.ones(len(end_pos), dtype=bool)
 
     def describe(self):
@@ -337,13 +340,15 @@ class PupilCamera:
         (or (N, 3): tracer i towards pupil point ``aim_index[i]``)."""
         return _toward(self.aim_points(), self.scene.in_sheet(tracers), aim_index)
 
-    def collected(self, end_pos, end_dir):
+    def collected(self, end_pos, end_dir, exit_index=None):
         """Which exit rays pass through the pupil when continued in a straight line.
 
         Parameters
         ----------
         end_pos, end_dir : ndarray, shape (K, 3)
             Exit points on ``x1 = x_end`` and unit exit directions (NaN for failed rays).
+        exit_index : ndarray, optional
+            Unused (no interface on the exit plane); as :meth:`LensCamera.collected`.
 
         Returns
         -------
@@ -388,7 +393,8 @@ class FlatWindow:
 
     Its inner face is the exit plane ``x1 = x_end``, its outer face ``thickness_mm`` beyond;
     rays refract at both faces (Snell), so a uniform medium images through it with the
-    window's own aberration, which the reference and the measured images then share.
+    window's own aberration, which the reference and the measured images then share. A
+    thickness of 0 is the bare fluid/outside interface: the glass index then drops out.
 
     Attributes
     ----------
@@ -404,9 +410,11 @@ class FlatWindow:
     outside_index: float = 1.0
 
     def __post_init__(self):
-        for name in ("thickness_mm", "glass_index", "outside_index"):
+        if not (np.isfinite(_number(self.thickness_mm)) and self.thickness_mm >= 0):
+            raise RimclError(f"the window's thickness_mm must be >= 0, got {self.thickness_mm!r}")
+        for name in ("glass_index", "outside_index"):
             value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
+            if not (np.isfinite(_number(value)) and value > 0):
                 raise RimclError(f"the window's {name} must be positive, got {value!r}")
 
     def describe(self):
@@ -523,8 +531,13 @@ class LensCamera:
     particle_diameter_um : float
         Tracer diameter (µm), for the geometric image.
     fluid_index : float
-        Index of the fluid at the window's inner face (only used with a window).
+        Index of the fluid the camera is aimed and focused through (the fluid's mean index;
+        only used with a window). Snell at the window's inner face takes each ray's own
+        index at its exit point where the caller gives it (``exit_index``).
     window : FlatWindow, optional
+        The wall between fluid and lens; thickness 0 is the bare fluid/outside interface.
+        None: no interface at all (the lens immersed in the fluid, or a fluid of the
+        outside's index); a real camera outside a tank always has one.
     rays : int
         Rays per tracer, spread area-uniformly over the pupil.
     """

@@ -82,6 +82,7 @@ def straight_rays(field, origins, directions, *, x_end, max_length=np.inf):
         path_length=run,
         optical_path=field.n_ref * run,
         n_metric=np.zeros((count, 3)),
+        exit_index=np.full(count, field.n_ref),
         steps=np.zeros(count, dtype=np.int64),
         status=status,
         step=0.0,

@@ -128,6 +128,9 @@ class TraceResult:
         ``∫ n ds`` (length units).
     n_metric : ndarray, shape (N, 3)
         The paper's ``N = (1/S) ∫ (∇n/n)_⊥ ds`` (1/length); ``|Δθ| ≈ |N| S``.
+    exit_index : ndarray, shape (N,)
+        The refractive index at the exit point, ``|T|`` of the exit state (``T = n dR/ds``),
+        what Snell at a wall on the exit plane takes.
     steps : ndarray of int, shape (N,)
         Integration steps taken (the shortened last step included).
     status : ndarray of int8, shape (N,)
@@ -148,6 +151,7 @@ class TraceResult:
     path_length: np.ndarray
     optical_path: np.ndarray
     n_metric: np.ndarray
+    exit_index: np.ndarray
     steps: np.ndarray
     status: np.ndarray
     step: float
@@ -734,7 +738,8 @@ def _finish(origins, directions, raw_out, info, step, config):
     end_t = join_pairs(raw_out[:, 6:9], raw_out[:, 9:12])
     status = info[:, 1].astype(np.int8)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        end_dir = end_t / np.linalg.norm(end_t, axis=1, keepdims=True)
+        exit_index = np.linalg.norm(end_t, axis=1)  # |T| = n at the exit point
+        end_dir = end_t / exit_index[:, None]
         distance = (end_pos[:, 0] - origins[:, 0]) / end_dir[:, 0]
         image_pos = end_pos - distance[:, None] * end_dir
         image_pos[:, 0] = origins[:, 0]
@@ -761,6 +766,7 @@ def _finish(origins, directions, raw_out, info, step, config):
         path_length=path_length,
         optical_path=optical_path,
         n_metric=n_metric,
+        exit_index=exit_index,
         steps=info[:, 0].astype(np.int64),
         status=status,
         step=step,

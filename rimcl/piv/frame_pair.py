@@ -142,12 +142,13 @@ def _expose(field, positions, intensity, camera, scene, renderer, shape, options
         )
         middle = time.perf_counter()
         ok = result.status == 0
-        collected = ok & camera.collected(result.end_pos, result.end_dir)
+        # Snell at a wall takes each ray's own index where it leaves the field (as the fan kernel)
+        collected = ok & camera.collected(result.end_pos, result.end_dir, result.exit_index)
         totals["status"] += np.bincount(result.status, minlength=len(STATUS_NAMES))
         totals["vignetted"] += int(np.count_nonzero(ok & ~collected))
         if isinstance(camera, LensCamera):
             # a lens images every ray onto the plane it is focused on (through its window)
-            points = camera.image_points(result.end_pos, result.end_dir)
+            points = camera.image_points(result.end_pos, result.end_dir, result.exit_index)
         else:
             points = result.image_pos[:, 1:]
         lit = collected.reshape(len(ids), rays)

@@ -58,14 +58,18 @@ class CaseIndex:
     light: float = 1.0
     heavy: float = 1.105
 
+    def mean_index(self, source, frame, time):
+        """The case's mean refractive index at a frame: what a camera is focused through
+        and what surrounds the tracers (Mie)."""
+        return float(self.field(source, frame, time).n_ref)
+
     def field(self, source, frame, time):
         """The field of a stored frame, or interpolated in time when ``frame`` is None."""
         if self.fluid is None:
             return _load_frame(source, frame, time, self.g)
         if self.difference == 0:
-            # a uniform fluid images every ray to its tracer whatever its index: traced at
-            # n = 1 (G = 0) it is the reference itself, bit for bit
-            return _load_frame(source, frame, time, 0.0)
+            # a uniform fluid: straight rays at the fluid's index (which a wall refracts)
+            return uniform_like(source, float(self.fluid.index()))
         # G = 1 gives δn = ρ - mean ρ and n_ref = 1 + mean ρ: the density, at any time
         unit = _load_frame(source, frame, time, 1.0)
         density = unit.delta_n.astype(np.float64) + (unit.n_ref - 1.0)
@@ -183,8 +187,8 @@ def _load_frame(source, frame, time, k_rho):
     return source.field(frame, *arguments)
 
 
-def uniform_like(source):
-    """A uniform field (n = 1) with the grid's extent and boundary, on 2 nodes per axis.
+def uniform_like(source, n_ref=1.0):
+    """A uniform field (index ``n_ref``) with the grid's extent and boundary, on 2 nodes per axis.
 
     Tracing through it gives the same floats as through a zero δn on the full grid (the
     interpolated δn and ∇n are exactly 0 either way), without a full-size copy.
@@ -197,7 +201,7 @@ def uniform_like(source):
         np.zeros((2, 2, 2), dtype=np.float32),
         spacing=extent / 2 if periodic else extent,
         origin=source.origin,
-        n_ref=1.0,
+        n_ref=float(n_ref),
         gradient=np.zeros((2, 2, 2, 3), dtype=np.float32),
         boundary=source.boundary,
     )

@@ -86,7 +86,7 @@ def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None
             )
         timings["trace"] += time.perf_counter() - start
         ok = result.status == 0
-        collected = ok & camera.collected(result.end_pos, result.end_dir)
+        collected = ok & camera.collected(result.end_pos, result.end_dir, result.exit_index)
         pass_.status_counts += np.bincount(result.status, minlength=len(STATUS_NAMES))
         pass_.vignetted += int(np.count_nonzero(ok & ~collected))
         pass_.ray_steps += int(result.steps.sum())
@@ -97,7 +97,7 @@ def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None
         flags = np.where(ok.all(axis=1), 0, int(TracerFlag.RAYS_FAILED))
         flags |= np.where((ok & ~collected).any(axis=1), int(TracerFlag.RAYS_VIGNETTED), 0)
         if hasattr(camera, "image_points"):  # a lens behind a window images through it
-            points = camera.image_points(result.end_pos, result.end_dir)
+            points = camera.image_points(result.end_pos, result.end_dir, result.exit_index)
         else:
             points = result.image_pos[:, 1:]
         weights = 1.0 if setup.mie is None else setup.mie.weights(directions)
@@ -220,7 +220,8 @@ def make_reference(setup, bar=None):
         setup.source, setup.scene, setup.start_positions, setup.times
     )
     setup.timings["track"] += time.perf_counter() - start
-    uniform = uniform_like(setup.source)
+    # the uniform medium of the camera's fluid: a wall refracts the reference rays alike
+    uniform = uniform_like(setup.source, getattr(setup.camera, "fluid_index", 1.0))
     reference_setup = dataclasses.replace(
         setup,
         trace_options={

@@ -63,8 +63,11 @@ def run_render(
     config : rimcl.scene.config.MeasureConfig, optional
         Camera, renderer, integrator, tracers, time and run settings (defaults: the
         dataclasses' defaults).
-    reference : Reference, optional
-        From an earlier result with the same configuration: skips the reference pass.
+    reference : Reference or sequence of Reference, optional
+        From an earlier result with the same configuration: skips the reference pass. A
+        sequence offers candidates: the one made for this configuration is used, and
+        the reference pass runs when none is (a lens camera's reference depends on the
+        case's mean index).
     shard : (int, int), optional
         Measure only tracers ``first..stop-1`` of the run (the same tracers, rays and
         numbers as in the whole run); :func:`rimcl.ptv.render_file.merge_results` joins
@@ -88,6 +91,8 @@ def run_render(
         frames = len(setup.frame_ids)
         bar = _progress(progress, (frames if reference is not None else 2 * frames) * count)
         try:
+            if isinstance(reference, (list, tuple)):
+                reference = next((r for r in reference if r.key == setup.key), None)
             if reference is None:
                 reference = make_reference(setup, bar)
             elif reference.key != setup.key:

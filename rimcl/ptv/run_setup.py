@@ -164,10 +164,12 @@ def resolve_setup(source, source_name, case_index, config, streams, shard):
     scene = Scene.from_grid(
         source.origin, source.spacing, source.shape, source.boundary, config.x_sheet, config.depth
     )
-    camera = config.camera.build(scene)
+    # the case's mean index: the lens is focused through it, the tracers scatter in it
+    medium_index = case_index.mean_index(source, frame_ids[0], times[0])
+    camera = config.camera.build(scene, medium_index)
     sensor = config.sensor.build(config.renderer.bit_depth, config.tracers.seed)
     imaging = config.renderer.build(scene, camera, sensor)
-    mie = config.mie.build(config.fluid.build())
+    mie = config.mie.build(config.fluid.build(), medium_index)
     device = select_device(config.run.device, need_fp64=config.run.engine == "device")
     _check_memory(source, source_name, config, camera, imaging, device, len(frame_ids))
     every_tracer = seed_tracers(

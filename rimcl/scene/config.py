@@ -12,6 +12,7 @@ import numbers
 
 from rimcl.core.errors import RimclError
 from rimcl.fields.media import Fluid
+from rimcl.fields.sample import SAMPLE_LENGTH_M
 from rimcl.imaging.frames import Imaging
 from rimcl.imaging.mie import MieWeights
 from rimcl.imaging.render import Renderer
@@ -22,6 +23,7 @@ DEFAULT_RAYS_PER_BATCH = 1 << 17  # rays traced per batch: ~40 MB of host memory
 DEFAULT_RAY_SAMPLE = 20_000
 ENGINES = ("device", "numpy")
 MAX_FRAMES = 1000
+DEFAULT_MAGNIFICATION = 0.2  # the lens camera's M when neither M nor the distance is given
 DEFAULT_PSF_SIGMA = 7.0  # the study's PSF (px) when neither the scene nor a lens sets one
 
 
@@ -55,9 +57,11 @@ class CameraConfig:
     wavelength_nm, particle_diameter_um : float
         Lens camera: light and tracer size (diffraction and geometric image).
     window_thickness_mm, window_index, outside_index : float
-        Lens camera: a flat window between fluid and lens (thickness 0: none).
+        Lens camera: a flat window between fluid and lens (thickness 0: the bare
+        fluid/outside interface).
     fluid_index : float
-        Lens camera: index of the fluid at the window's inner face.
+        Lens camera: index of the fluid it is aimed and focused through; None: the
+        measured case's mean index.
     """
 
     kind: str = "plane"
@@ -79,16 +83,20 @@ class CameraConfig:
     window_thickness_mm: float = 0.0
     window_index: float = 1.52
     outside_index: float = 1.0
-    fluid_index: float = 1.0
+    fluid_index: float = None
 
-    def build(self, scene):
-        """The camera object for a :class:`rimcl.optics.camera.Scene`."""
+    def build(self, scene, medium_index=None):
+        """The camera object for a :class:`rimcl.optics.camera.Scene`.
+
+        ``medium_index`` is the measured case's mean refractive index: a lens camera is
+        aimed and focused through it unless ``fluid_index`` is given (default 1).
+        """
         if self.kind not in CAMERAS:
             raise RimclError(f"unknown camera {self.kind!r}; choose from {CAMERAS}")
         if self.kind == "plane":
             return PlaneCamera(scene, int(self.fan))
         if self.kind == "lens":
-            return self._lens(scene)
+            return self._lens(scene, medium_index)
         distance = 4.0 * scene.depth if self.distance is None else float(self.distance)
         diameter = self.aperture_diameter
         if diameter is None and self.focal_length is None and self.f_number is None:
@@ -103,29 +111,36 @@ class CameraConfig:
             rays=int(self.pupil_rays),
         )
 
-    def _lens(self, scene):
+    def _lens(self, scene, medium_index):
         if self.length_m is None:
             raise RimclError(
-                "the lens camera needs the field's physical size: field.length_m "
-                "(metres per field length unit)"
+                "the lens camera (the default) needs the field's physical size: give "
+                "field.length_m (metres per field length unit), or use the paper's fan "
+                '(--preset paper or camera.kind = "plane"), which needs none'
             )
-        window = None
-        if self.window_thickness_mm:
-            window = FlatWindow(
-                float(self.window_thickness_mm), float(self.window_index), float(self.outside_index)
-            )
+        # always a wall: thickness 0 is the bare fluid/air interface, which refracts too
+        window = FlatWindow(
+            float(self.window_thickness_mm), float(self.window_index), float(self.outside_index)
+        )
         return LensCamera(
             scene,
             float(self.length_m),
             focal_length_mm=float(self.focal_length_mm),
             f_number=8.0 if self.f_number is None else float(self.f_number),
-            magnification=self.magnification,
+            # M = 0.2 unless the working distance sets it: the default camera's
+            magnification=self.magnification
+            if self.magnification is not None or self.working_distance_mm is not None
+            else DEFAULT_MAGNIFICATION,
             working_distance_mm=self.working_distance_mm,
             pixel_pitch_um=float(self.pixel_pitch_um),
             pixels=tuple(int(p) for p in self.sensor_pixels),
             wavelength_nm=float(self.wavelength_nm),
             particle_diameter_um=float(self.particle_diameter_um),
-            fluid_index=float(self.fluid_index),
+            fluid_index=float(
+                self.fluid_index
+                if self.fluid_index is not None
+                else (1.0 if medium_index is None else medium_index)
+            ),
             window=window,
             rays=int(self.pupil_rays),
         )
@@ -224,7 +239,8 @@ class SensorConfig:
 class MieConfig:
     """Mie weights of the rays (:class:`rimcl.imaging.mie.MieWeights`); uniform when not enabled.
 
-    ``fluid_index`` None: the fluid's base index (``[fluid]``), else 1.
+    ``fluid_index`` None: the index of the medium around the tracers, the measured case's
+    mean index (the fluid's base index, else 1, without one).
     """
 
     enabled: bool = False
@@ -237,11 +253,13 @@ class MieConfig:
     polarisation: str = "unpolarised"
     polarisation_direction: tuple = (0.0, 0.0, 1.0)
 
-    def build(self, fluid=None):
-        """The weights, or None when off."""
+    def build(self, fluid=None, medium_index=None):
+        """The weights, or None when off (``medium_index``: the case's mean index)."""
         if not self.enabled:
             return None
         fluid_index = self.fluid_index
+        if fluid_index is None:
+            fluid_index = medium_index
         if fluid_index is None:
             fluid_index = 1.0 if fluid is None else float(fluid.index())
         polarisation = self.polarisation
@@ -488,7 +506,6 @@ class MeasureConfig:
         integrator, run = scene["integrator"], scene["run"]
         box = field["box"]
         fluid = FluidConfig(**scene["fluid"])
-        base_fluid = fluid.build()
         return cls(
             box=None if box is None else tuple(tuple(pair) for pair in box),
             x_sheet=field["x_sheet"],
@@ -502,7 +519,9 @@ class MeasureConfig:
                 f_number=camera["f_number"],
                 distance=camera["distance"],
                 view_angle=camera["view_angle"],
-                length_m=field["length_m"],
+                length_m=field["length_m"]
+                if field["length_m"] is not None or field["path"]
+                else SAMPLE_LENGTH_M,
                 focal_length_mm=camera["focal_length_mm"],
                 magnification=camera["magnification"],
                 working_distance_mm=camera["working_distance_mm"],
@@ -513,7 +532,6 @@ class MeasureConfig:
                 window_thickness_mm=camera["window_thickness_mm"],
                 window_index=camera["window_index"],
                 outside_index=camera["outside_index"],
-                fluid_index=1.0 if base_fluid is None else float(base_fluid.index()),
             ),
             renderer=RendererConfig(
                 kind=renderer["kind"],

@@ -133,12 +133,13 @@ def imaging_keys():
         SceneKey(
             "camera",
             "kind",
-            "plane",
+            "lens",
             "str",
-            "plane: rays aimed at a fan x fan grid on the exit plane (the paper); "
-            "pupil: rays over a circular aperture (field units); lens: a real camera in "
-            "physical units (focal_length_mm, f_number, magnification, sensor, window; "
-            "pupil_rays rays per tracer; needs field.length_m)",
+            "lens (the default): a real PTV camera in physical units (50 mm f/8 at M = 0.2: "
+            "NA 0.010) behind the tank's wall (focal_length_mm, f_number, magnification, "
+            "sensor, window; pupil_rays rays per tracer; needs field.length_m); plane: rays "
+            "aimed at a fan x fan grid on the exit plane (the paper's, NA ~0.8: --preset "
+            "paper); pupil: rays over a circular aperture (field units)",
             choices=choice["camera"],
         ),
         SceneKey(
@@ -150,7 +151,13 @@ def imaging_keys():
             positive=True,
         ),
         SceneKey(
-            "camera", "pupil_rays", 1024, "int", "pupil camera: rays per tracer", positive=True
+            "camera",
+            "pupil_rays",
+            256,
+            "int",
+            "pupil and lens camera: rays per tracer (a narrow lens cone needs few; the "
+            "sensitivity check repeats the study with 4 times as many)",
+            positive=True,
         ),
         SceneKey(
             "camera",
@@ -223,10 +230,11 @@ def imaging_keys():
         SceneKey(
             "renderer",
             "threshold",
-            40.0,
+            200.0,
             "float",
-            "grey threshold in camera counts (10 bits: of 1023; the paper: 100 for air); "
-            "the peak of a C4 tracer image falls to a few percent of the reference peak",
+            "grey threshold in camera counts (12 bits: of 4095; 200 is 15 % of the default "
+            "lens camera's reference peak of 10000 e- = 1365 counts; the paper: 100 of 1023 "
+            "for air, 500 for water)",
             minimum=0.0,
         ),
         SceneKey(
@@ -240,11 +248,11 @@ def imaging_keys():
         SceneKey(
             "renderer",
             "bit_depth",
-            10,
+            12,
             "int",
-            "bits per pixel of the camera, 8 to 16 (paper: 10); the rounding to counts moves "
-            "centroids by a few 1e-4 pixel at 10 bits, a floor under the weakest cases' "
-            "velocity errors (scale the threshold with the full scale 2**bits - 1)",
+            "bits per pixel of the camera, 8 to 16 (a 12-bit sCMOS; paper: 10); the rounding "
+            "to counts moves centroids by a few 1e-4 pixel at 10 bits, a floor under the "
+            "weakest cases' velocity errors (scale the threshold with the full scale 2**bits - 1)",
             positive=True,
         ),
         SceneKey(
@@ -296,7 +304,8 @@ def imaging_keys():
             None,
             "float",
             "metres per field length unit (the field's physical size; the lens camera needs "
-            "it); default: the field file's length_m",
+            "it); default: the field file's length_m, 0.0106 for the shipped sample (a 66.6 mm "
+            "cube: 2048 px of 6.5 µm at M = 0.2 across its 2π)",
             positive=True,
             example=0.0106,
         ),
@@ -332,7 +341,7 @@ def imaging_keys():
             "magnification",
             None,
             "float",
-            "lens camera: magnification M (or working_distance_mm)",
+            "lens camera: magnification M (or working_distance_mm); default 0.2",
             positive=True,
             example=0.2,
         ),
@@ -379,9 +388,10 @@ def imaging_keys():
         SceneKey(
             "camera",
             "window_thickness_mm",
-            0.0,
+            10.0,
             "float",
-            "lens camera: a flat window between fluid and lens (mm; 0: none)",
+            "lens camera: the flat wall between fluid and lens (mm; 0: the bare fluid/air "
+            "interface, which refracts as well)",
             minimum=0.0,
         ),
         SceneKey("camera", "window_index", 1.52, "float", "window glass index", minimum=1.0),

@@ -13,7 +13,7 @@ def physics_keys():
         SceneKey(
             "sensor",
             "noise",
-            False,
+            True,
             "bool",
             "photon shot noise, read noise and background (false: the deterministic camera)",
         ),
@@ -26,7 +26,7 @@ def physics_keys():
             positive=True,
         ),
         SceneKey("sensor", "read_noise_e", 2.0, "float", "read noise (e- rms)", minimum=0.0),
-        SceneKey("sensor", "background_e", 0.0, "float", "background per pixel (e-)", minimum=0.0),
+        SceneKey("sensor", "background_e", 20.0, "float", "background per pixel (e-)", minimum=0.0),
         SceneKey("sensor", "full_well_e", 30000.0, "float", "full well (e-)", positive=True),
         SceneKey(
             "sensor",
@@ -46,9 +46,7 @@ def physics_keys():
             minimum=0,
             example=0,
         ),
-        SceneKey(
-            "mie", "enabled", False, "bool", "weight each ray by its Mie scattering intensity"
-        ),
+        SceneKey("mie", "enabled", True, "bool", "weight each ray by its Mie scattering intensity"),
         SceneKey("mie", "diameter_um", 10.0, "float", "particle diameter (µm)", positive=True),
         SceneKey(
             "mie",
@@ -64,7 +62,7 @@ def physics_keys():
             "fluid_index",
             None,
             "float",
-            "index around the particle; default: the [fluid]'s, else 1",
+            "index around the particle; default: the measured case's mean index",
             minimum=1.0,
             example=1.335,
         ),
@@ -79,7 +77,7 @@ def physics_keys():
         SceneKey(
             "mie",
             "polarisation",
-            "unpolarised",
+            "linear",
             "str",
             "relative to each ray's scattering plane, or linear along polarisation_direction",
             choices=("unpolarised", "perpendicular", "parallel", "linear"),

@@ -38,6 +38,16 @@ def run_keys():
         ),
         SceneKey(
             "run",
+            "sensitivity",
+            False,
+            "bool",
+            "measure every case again with the threshold halved and doubled, the other "
+            "interpolation and 4 times the rays (4 studies more): the sensitivity band of "
+            "each headline number in summary.md (without it: only the excluded tracers "
+            "counted by their optics error)",
+        ),
+        SceneKey(
+            "run",
             "ray_sample",
             20000,
             "int",

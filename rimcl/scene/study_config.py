@@ -31,19 +31,23 @@ class StudyRunConfig:
 
     Attributes
     ----------
-    mode : {"ptv", "piv", "both"}
+    mode : {"ptv", "piv", "both", "lpt"}
     scheduler : str
         Dask scheduler (``"local:N"`` or an address); "" = this process.
     shard_tracers : int
         Tracers per Dask task.
     numerics : bool
         Run the Appendix A check (:mod:`rimcl.ptv.numerics`).
+    sensitivity : bool
+        Measure every case again under the settings a user could choose differently
+        (:mod:`rimcl.study.sensitivity`).
     """
 
     mode: str = "ptv"
     scheduler: str = ""
     shard_tracers: int = 100
     numerics: bool = True
+    sensitivity: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -131,6 +135,7 @@ class StudyConfig:
                 scheduler=run["scheduler"],
                 shard_tracers=run["shard_tracers"],
                 numerics=run["numerics"],
+                sensitivity=run["sensitivity"],
             ),
             dt_multiples=tuple(scene["time"]["dt_multiples"]),
             piv=PivStudyConfig(**scene["piv"]),

@@ -48,6 +48,7 @@ from rimcl.stats.error_blocks import (
 )
 from rimcl.stats.peaks import discrete_mode, pdf_peak
 from rimcl.stats.render_file import OPTICS_COLUMNS, load_render
+from rimcl.stats.sensitivity import EXCLUDED_BY_OPTICS, bands, headline_values
 from rimcl.stats.summaries import CONDITION_FRACTION, finite_or_none
 from rimcl.stats.tables import NOTE_COLUMN, area_changes, flagged_tracers, rows_of, write_json
 from rimcl.stats.units import case_units, write_tidy
@@ -131,9 +132,11 @@ def case_statistics(tables):
         Keys documented in the README (``name``, ``G``, ``delta_n_max``, ``n_tracers``,
         ``n_used``, ``n_excluded``, ``position_error_*`` with ``*_ci95``, ``velocity``,
         ``acceleration`` (and ``velocity_fit``, ``acceleration_fit`` where the file has
-        them), ``baseline``, ``optics`` and ``imaging`` (where the file has the optics
-        columns), ``budget_verdict``, ``convergence``, ``area_change_peak``,
-        ``circularity_peak``, ``rays``).
+        them), ``against_truth`` (the same groups against the truth, the paper's
+        definition; see :data:`ERROR_DEFINITIONS`), ``baseline``, ``optics`` and
+        ``imaging`` (where the file has the optics columns), ``budget_verdict``,
+        ``convergence``, ``sensitivity`` (:mod:`rimcl.stats.sensitivity`),
+        ``area_change_peak``, ``circularity_peak``, ``rays``).
     """
     excluded_ids, excluded_counts = flagged_tracers(tables)
     noted_ids, noted_counts = flagged_tracers(tables, NOTE_COLUMN)
@@ -158,6 +161,17 @@ def case_statistics(tables):
     }
     refraction = refraction_errors(tables, tracers, blocks, bootstrap)
     case.update(refraction)
+    # the paper's definition: measured minus the truth (refraction plus the baseline)
+    case["against_truth"] = {
+        group: vector_errors(
+            table,
+            symbol,
+            vector_columns(table, symbol, "meas"),
+            vector_columns(table, symbol, "true"),
+            bootstrap,
+        )
+        for group, (symbol, table) in blocks.items()
+    }
     case["baseline"] = {
         group: vector_errors(
             table,
@@ -181,6 +195,9 @@ def case_statistics(tables):
     case["convergence"] = convergence(tables, kept, blocks, refraction)
     case["budget_verdict"] = budget_verdict(case)
     case["units"] = case_units(tables, case=case)
+    # the method's part of the uncertainty: here the variant that needs no measurement
+    variants = {EXCLUDED_BY_OPTICS: headline_values(tables, excluded_by_optics=True)}
+    case["sensitivity"] = {"variants": variants, "bands": bands(case, variants)}
     case["rays"] = {
         "n_rays": rays_total,
         "n_rays_ok": int(np.sum(tables.tracers["n_rays_ok"])),
@@ -202,7 +219,23 @@ def check_cases(all_tables):
     return sorted(all_tables, key=lambda tables: tables.delta_n_max)
 
 
+#: The two error definitions of stats.json, named.
+ERROR_DEFINITIONS = {
+    "refraction": (
+        "measured minus reference (the same tracers imaged through a uniform medium): "
+        "refraction alone; the blocks position_error_*, velocity, acceleration, "
+        "velocity_fit, acceleration_fit, optics, imaging"
+    ),
+    "against_truth": (
+        "measured minus truth, the paper's ε = u' - u: refraction plus the baseline "
+        "(finite differences or fit, and imaging, without refraction); the block "
+        "against_truth"
+    ),
+    "baseline": "reference minus truth: the measurement's own error without refraction",
+}
+
 METHODS = {
+    "error_definitions": ERROR_DEFINITIONS,
     "position_error_peak": "mode of a Gaussian KDE (Scott) of log10(|x_meas - x_ref| / L)",
     "excluded": "a tracer with any flag in any row is left out of its case",
     "ci95": (
@@ -215,8 +248,10 @@ METHODS = {
         "usable rows of the case)"
     ),
     "convergence": (
-        "nested random subsamples of N/16 ... N tracers; not converged: the magnitude grows "
-        "over N/4 < N/2 < N and the value at N lies outside the 95 % interval at N/4"
+        "nested random subsamples of N/16 ... N tracers; not converged: the value at N lies "
+        "outside the 95 % interval at N/4 or at N/2 (either direction), or, for the ratio "
+        "statistics (systematic, random), the largest 3 rows carry more than half of "
+        "sum((error/truth)^2)"
     ),
     "area_change_peak": "centre of the fullest bin of a histogram of whole-pixel steps",
     "area_change_p90": "90th percentile of |ΔA/A| over the rows with a reference image",

@@ -102,7 +102,10 @@ def draw_error_budget(cases):
     figure_title(
         figure,
         "Error budget: optics (mean of the traced ray image points), imaging (renderer, "
-        "threshold, centroid),\ntheir total, and the baseline (bars: bootstrap 95 % intervals)",
+        "threshold, centroid, noise: total minus optics, tracer by tracer),\ntheir total, "
+        "and the baseline (bars: bootstrap 95 % intervals). Imaging can lie above the total: "
+        "where the image moves against its rays' mean (a threshold cutting a reshaped "
+        "image), the two parts partly cancel in the total",
         fontsize=9,
     )
     return figure, {"panels": panels}

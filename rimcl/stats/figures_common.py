@@ -1,7 +1,7 @@
 """What every study figure shares: panel layout, titles, case labels and colours, and files.
 
 Panel helpers (:func:`new_figure`, :func:`panel_title`, :func:`figure_title`), the relative-error
-histograms on symmetric-log bins (:func:`pdf_series`, :func:`draw_pdf_series`), statistics
+PDFs of log-magnitudes (:func:`pdf_series`, :func:`draw_pdf_series`), statistics
 against ``G`` with their bootstrap 95 % intervals (:func:`statistic_against_g`,
 :func:`errorbars`), the last touches to log axes (:func:`finish_axes`) and
 :func:`save_figure`, which writes a figure as PNG, PDF and the JSON of its numbers. Used by
@@ -110,14 +110,6 @@ def figure_title(figure, text, fontsize=9):
     figure.suptitle("\n".join(lines), fontsize=fontsize)
 
 
-def _symlog_edges(magnitude_floor, magnitude_top):
-    """Histogram edges: linear inside ``±floor``, ``BINS_PER_DECADE`` log bins beyond."""
-    decades = max(np.log10(magnitude_top / magnitude_floor), 1.0 / BINS_PER_DECADE)
-    outer = magnitude_floor * np.logspace(0.0, decades, int(np.ceil(decades * BINS_PER_DECADE)) + 1)
-    inner = np.linspace(-magnitude_floor, magnitude_floor, 5)[1:-1]
-    return np.concatenate([-outer[::-1], inner, outer])
-
-
 def relative_errors(table, symbol, component, measured, reference):
     """``ε / truth`` of a component (``"2"``, ``"3"``) or of the magnitude (``"magnitude"``)."""
     columns = (f"{symbol}2", f"{symbol}3")
@@ -134,67 +126,50 @@ def relative_errors(table, symbol, component, measured, reference):
 
 
 def pdf_series(samples_by_case, cases):
-    """Histograms of relative errors on common symmetric-log bins, one series per case.
+    """PDFs of the magnitude of relative errors on common log bins, one series per case.
 
-    Returns the series (``pdf``: probability density of ``ε / truth``) and the bin edges.
+    A log-magnitude PDF has no gap at zero and no lopsided axis: ``pdf`` is the probability
+    density of ``log10 |ε / truth|`` over the non-zero errors (it integrates to 1 over
+    ``log10`` of the bin edges); ``n_zero`` counts the exact zeros, which it leaves out.
+    The sign is in the systematic error and the quartiles.
+
+    Returns the series and the bin edges (magnitudes, increasing).
     """
     magnitudes = np.concatenate([np.abs(s[s != 0]) for s in samples_by_case] or [np.empty(0)])
+    magnitudes = magnitudes[np.isfinite(magnitudes)]
     if magnitudes.size == 0:
-        edges = np.array([-1.0, 1.0])
+        edges = np.array([0.1, 1.0])
     else:
-        floor = 10.0 ** np.floor(np.log10(np.percentile(magnitudes, 1)))
+        floor = 10.0 ** np.floor(np.log10(np.percentile(magnitudes, 0.5)))
         top = 10.0 ** np.ceil(np.log10(magnitudes.max()))
-        edges = _symlog_edges(floor, top)
+        decades = max(round(np.log10(top / floor)), 1)
+        edges = floor * np.logspace(0.0, decades, decades * BINS_PER_DECADE + 1)
     series = []
     for case, sample in zip(cases, samples_by_case, strict=True):
+        sample = sample[np.isfinite(sample)]
+        nonzero = np.abs(sample[sample != 0])
         entry = {"label": case_label(case), "n": int(sample.size), "pdf": []}
-        entry["exactly_zero"] = bool(sample.size and np.all(sample == 0))
-        if sample.size and not entry["exactly_zero"]:
-            counts, _ = np.histogram(sample, bins=edges)
-            entry["pdf"] = (counts / sample.size / np.diff(edges)).tolist()
+        entry["n_zero"] = int(sample.size - nonzero.size)
+        entry["exactly_zero"] = bool(sample.size and nonzero.size == 0)
+        if nonzero.size:
+            # the few below the lowest edge join its bin: every error is counted
+            counts, _ = np.histogram(np.clip(nonzero, edges[0], edges[-1]), bins=edges)
+            entry["pdf"] = (counts / nonzero.size / np.diff(np.log10(edges))).tolist()
         series.append(entry)
     return series, edges
 
 
-def _symlog_ticks(ax, edges):
-    """Symmetric-log x axis with at most three labelled decades on each side of zero."""
-    floor, top = edges[len(edges) // 2 + 1], edges[-1]
-    ax.set_xscale("symlog", linthresh=floor, linscale=0.5)
-    low, high = round(np.log10(floor)), round(np.log10(top))
-    stride = max(1, int(np.ceil((high - low + 1) / 3)))
-    # none within a decade of the linear part, where the labels would crowd
-    exponents = list(range(high, low + 1, -stride)) or [high]
-    ticks = [-(10.0**k) for k in exponents] + [0.0] + [10.0**k for k in reversed(exponents)]
-    ax.xaxis.set_major_locator(FixedLocator(ticks))
-    ax.xaxis.set_minor_locator(NullLocator())
-
-    def label(value, _position):
-        if value == 0:
-            return "0"
-        sign = "−" if value < 0 else ""
-        return f"${sign}10^{{{round(np.log10(abs(value)))}}}$"
-
-    ax.xaxis.set_major_formatter(FuncFormatter(label))
-
-
 def draw_pdf_series(ax, series, edges, colors, xlabel, legend=True):
-    centres = np.where(
-        edges[:-1] * edges[1:] > 0,
-        np.sign(edges[1:]) * np.sqrt(np.abs(edges[:-1] * edges[1:])),
-        0.5 * (edges[:-1] + edges[1:]),
-    )
+    centres = np.sqrt(edges[:-1] * edges[1:])
     for entry, color in zip(series, colors, strict=True):
         if entry["exactly_zero"]:
             ax.plot([], [], color=color, label=f"{entry['label']}: ε = 0 exactly")
         elif entry["pdf"]:
-            density = np.asarray(entry["pdf"])
-            shown = np.where(density > 0, density, np.nan)
-            ax.plot(centres, shown, "-o", ms=2.5, color=color, label=entry["label"])
-    if len(edges) > 2:
-        _symlog_ticks(ax, edges)
-    ax.set_yscale("log")
+            ax.plot(centres, entry["pdf"], "-", lw=1.2, color=color, label=entry["label"])
+    ax.set_xscale("log")
+    ax.set_ylim(bottom=0)
     ax.set_xlabel(xlabel)
-    ax.set_ylabel("PDF")
+    ax.set_ylabel("PDF of log10 |ε / truth|")
     ax.grid(True, which="major", alpha=0.3)
     if legend:
         ax.legend(fontsize=6)

@@ -1,8 +1,8 @@
 """The ``convergence`` figure: headline statistics against the number of tracers (nested
-subsamples), those that keep growing marked (:mod:`rimcl.stats.convergence`).
+subsamples), one compact panel per quantity, those not converged marked
+(:mod:`rimcl.stats.convergence`).
 """
 
-import numpy as np
 from matplotlib.lines import Line2D
 
 from rimcl.stats.figures_common import (
@@ -17,108 +17,105 @@ from rimcl.stats.figures_common import (
     ticks_at,
 )
 
-#: Statistics of the convergence figure: (key in ``convergence``, axis label, title).
-CONVERGENCE_COLUMNS = (
-    ("random", "std(ε/truth)", "the paper's random error"),
-    ("rms_normalized", "rms(ε) / rms(truth)", "rms(ε) / rms(truth)"),
-    ("iqr", "IQR of ε/truth", "IQR of ε/truth"),
-    (
-        "conditioned_rms_normalized",
-        "rms ratio where |truth| ≥ ½ rms",
-        "rms ratio, |truth| ≥ ½ rms(truth)",
-    ),
+#: Statistics of the convergence figure: (key in ``convergence``, name, line style).
+CONVERGENCE_STATISTICS = (
+    ("rms_normalized", "rms(ε)/rms(truth)", "-"),
+    ("random", "the paper's random error std(ε/truth)", "--"),
 )
 
 
 def draw_convergence(cases):
+    """One compact panel per quantity: each statistic over the nested subsamples, divided
+    by its value at N, so that a converged statistic is a flat line at 1 and a jump of the
+    value at N shows as the subsamples' points far from 1."""
     groups = [g for g, *_ in KINEMATIC_BLOCKS if any(g in c.get("convergence", {}) for c in cases)]
-    rows = max(len(groups), 1)
-    figure, axes = new_figure(rows, len(CONVERGENCE_COLUMNS))
+    columns = max(min(len(groups), 2), 1)
+    figure, axes = new_figure(max(-(-len(groups) // 2), 1), columns)
     colors = case_colors(len(cases))
     panels = {}
     letters = (chr(ord("a") + i) for i in range(26))
-    for row, group in enumerate(groups):
+    descriptions = {g: d for g, _, d in KINEMATIC_BLOCKS}
+    for ax, group in zip(axes.flat, groups, strict=False):
         component = f"{'u' if group.startswith('velocity') else 'a'}3"
-        description = dict((g, d) for g, _, d in KINEMATIC_BLOCKS)[group]
-        for col, (statistic, ylabel, text) in enumerate(CONVERGENCE_COLUMNS):
-            ax = axes[row, col]
-            series, growing, widest = [], [], []
-            for case, color in zip(cases, colors, strict=True):
-                convergence = case.get("convergence", {})
+        series, widest = [], []
+        for case, color in zip(cases, colors, strict=True):
+            convergence = case.get("convergence", {})
+            if case["G"] <= 0:
+                continue
+            for statistic, _, style in CONVERGENCE_STATISTICS:
                 entry = dig(convergence, group, component, statistic)
-                if entry is None or case["G"] <= 0:
+                if entry is None or not entry["value"] or not entry["value"][-1]:
                     continue
+                full = entry["value"][-1]
                 flagged = f"{group}.{component}.{statistic}" in convergence["not_converged"]
                 points = [
-                    (n, v, ci)
+                    (n, v / full, None if ci is None else [ci[0] / full, ci[1] / full], ci)
                     for n, v, ci in zip(
                         convergence["n_tracers"], entry["value"], entry["ci95"], strict=True
                     )
-                    if v is not None and v != 0
+                    if v is not None
                 ]
-                if not points:
-                    continue
-                ns, values, intervals = zip(*points, strict=True)
+                ns, ratios, intervals, original = zip(*points, strict=True)
                 widest = max(widest, list(ns), key=lambda sizes: (len(sizes), sizes[-1:]))
-                marker = "^" if flagged else "o"
-                ax.plot(ns, np.abs(values), "-", color=color, lw=1)
+                ax.plot(ns, ratios, style, color=color, lw=1)
                 errorbars(
                     ax,
                     ns,
-                    values,
+                    ratios,
                     intervals,
-                    True,
+                    False,
                     color=color,
-                    marker=marker,
+                    marker="^" if statistic == "random" else "o",
                     ms=4,
                     mfc="white" if flagged else color,
                 )
-                if flagged:
-                    growing.append(case["name"])
                 series.append(
                     {
                         "label": case_label(case),
+                        "case": case["name"],
+                        "statistic": statistic,
                         "n_tracers": list(ns),
-                        "value": list(values),
-                        "ci95": list(intervals),
+                        "value": [v * full for v in ratios],
+                        "ci95": list(original),
+                        "relative_to_n": list(ratios),
                         "not_converged": flagged,
                     }
                 )
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            # the sizes of the case with the most subsamples: the sizes of cases of other N
-            # would sit too close to them to be labelled
-            ticks_at(ax.xaxis, widest)
-            ax.set_xlabel("tracers used (nested subsamples)")
-            ax.set_ylabel(f"{ylabel}, {component}")
-            ax.grid(True, which="major", alpha=0.3)
-            letter = next(letters)
-            note = f"; not converged: {', '.join(growing)}" if growing else ""
-            panel_title(ax, letter, f"{text}; {description}{note}", fontsize=8)
-            panels[letter] = {"group": group, "statistic": statistic, "series": series}
-    if not groups:
-        for ax in axes.flat:
-            ax.set_axis_off()
+        ax.axhline(1.0, color="0.5", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ticks_at(ax.xaxis, widest)
+        ax.set_xlabel("tracers used (nested subsamples)")
+        ax.set_ylabel(f"value / value at N, {component}")
+        ax.grid(True, which="major", alpha=0.3)
+        letter = next(letters)
+        flagged = list(dict.fromkeys(s["case"] for s in series if s["not_converged"]))
+        note = f"; not converged: {', '.join(flagged)}" if flagged else ""
+        panel_title(ax, letter, f"{component}, {descriptions[group]}{note}", fontsize=8)
+        panels[letter] = {"group": group, "series": series}
+    for ax in list(axes.flat)[len(groups) :]:
+        ax.set_axis_off()
     handles = [
-        Line2D([], [], marker="o", color=color, label=case_label(case))
+        Line2D([], [], color=color, label=case_label(case))
         for case, color in zip(cases, colors, strict=True)
         if case["G"] > 0
     ]
-    handles.append(
+    handles += [
         Line2D(
-            [],
-            [],
-            marker="^",
-            mfc="white",
-            color="k",
-            linestyle="none",
-            label="still growing: not converged",
+            [], [], color="k", linestyle=style, marker="^" if key == "random" else "o", label=name
         )
+        for key, name, style in CONVERGENCE_STATISTICS
+    ]
+    handles.append(
+        Line2D([], [], marker="o", mfc="white", color="k", linestyle="none", label="not converged")
     )
     figure.legend(handles=handles, loc="outside right center", fontsize=7)
     figure_title(
         figure,
-        "Convergence with the number of tracers (|value|; bars: bootstrap 95 % intervals)",
+        "Convergence with the number of tracers: each statistic over nested subsamples "
+        "divided by its value at N (1: converged; open markers: not converged, by a jump "
+        "out of the N/4 or N/2 interval or a few rows carrying it); bars: bootstrap 95 % "
+        "intervals",
         fontsize=9,
     )
     return figure, {"panels": panels}

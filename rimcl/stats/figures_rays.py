@@ -4,6 +4,7 @@ literature studies marked) and ``path_length`` (S / L against the incidence angl
 
 import numpy as np
 from matplotlib import colormaps
+from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from rimcl.stats.figures_common import CASE_MARKERS, case_label, new_figure, panel_title
@@ -32,8 +33,8 @@ LITERATURE_STUDIES = (
 
 
 def draw_ray_deflection(all_tables, cases):
-    figure, axes = new_figure(1, 1, size=(10.0, 5.6))
-    ax = axes[0, 0]
+    figure = Figure(figsize=(10.0, 7.4), dpi=120, layout="constrained")
+    ax, ax_studies = figure.subplots(2, 1, gridspec_kw={"height_ratios": [3, 1.3]})
     panel = {"x": "|N| L", "y": "|Δθ| (rad)", "series": [], "literature": []}
     lows, highs = [], []
     groups = (
@@ -76,18 +77,15 @@ def draw_ray_deflection(all_tables, cases):
     literature_x = [delta_n / n for _, _, delta_n, n in LITERATURE_STUDIES]
     line = np.array([min([*lows, *literature_x]), max([*highs, *literature_x])])
     ax.plot(line, line, "k--", lw=1)
-    # the literature studies as a rug along the bottom: their |N| L only (see LITERATURE_STUDIES)
-    rug = ax.get_xaxis_transform()
+    # the literature studies on their own axis below: their |N| L only (no deflection is
+    # in the paper's text, see LITERATURE_STUDIES), one row per study
     literature_handles = []
     for index, ((reference, flow, delta_n, n), x) in enumerate(
         zip(LITERATURE_STUDIES, literature_x, strict=True)
     ):
         marker = CASE_MARKERS[index % len(CASE_MARKERS)]
         color = colormaps["tab10"](index % 10)
-        # staggered heights: several studies share nearly the same |N| L
-        height = 0.04 + 0.035 * (index % 4)
-        ax.plot([x, x], [0.0, height], color=color, lw=1.2, transform=rug)
-        ax.plot([x], [height], marker=marker, color=color, mfc="white", ms=5, transform=rug)
+        ax_studies.plot([x], [index + 1], marker=marker, color=color, mfc="white", ms=6)
         literature_handles.append(
             Line2D(
                 [],
@@ -96,7 +94,7 @@ def draw_ray_deflection(all_tables, cases):
                 color=color,
                 mfc="white",
                 linestyle="none",
-                label=f"{reference}: {flow}, Δn_max = {delta_n:.2g}",
+                label=f"{index + 1}. {reference}: {flow}, Δn_max = {delta_n:.2g}",
             )
         )
         panel["literature"].append(
@@ -104,13 +102,21 @@ def draw_ray_deflection(all_tables, cases):
         )
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax_studies.set_xscale("log")
+    ax_studies.set_xlim(ax.get_xlim())  # the same |N| L axis as (a)
     ax.set_xlabel("|N| L (path-averaged transverse ∇n/n times slab depth L)")
+    ax_studies.set_xlabel("|N| L ≈ Δn_max / n (the same axis as (a))")
     ax.set_ylabel("ray deflection |Δθ| (rad)")
+    panel_title(ax, "a", "Ray deflection (frame-0 ray sample, rays with status ok)", fontsize=8)
+    ax_studies.set_ylim(0.3, len(LITERATURE_STUDIES) + 0.7)
+    ax_studies.set_yticks(range(1, len(LITERATURE_STUDIES) + 1))
+    ax_studies.set_ylabel("study (legend)")
+    ax_studies.grid(True, which="major", axis="x", alpha=0.3)
     panel_title(
-        ax,
-        "a",
-        "Ray deflection (frame-0 ray sample, rays with status ok); ticks along the bottom: "
-        "|N| L ≈ Δn_max / n of the studies of the paper's Table 1",
+        ax_studies,
+        "b",
+        "The studies of the paper's Table 1: |N| L ≈ Δn_max / n over their depth (the paper "
+        "gives no deflection for them)",
         fontsize=8,
     )
     ax.grid(True, which="major", alpha=0.3)

@@ -16,6 +16,9 @@ from rimcl.stats.tables import area_changes, kept_rows
 
 #: Cases whose spreads of ΔA/A differ by more than this factor get separate axes.
 REGIME_SPREAD_RATIO = 20.0
+#: Smallest median reference image area (px²) whose circularity describes a shape: the
+#: perimeter of a blob of a few whole pixels is a pixel count (a 2 x 2 blob gives 0.32).
+SHAPE_MIN_AREA_PX = 20.0
 
 
 def _shape_regimes(changes):
@@ -66,7 +69,13 @@ def draw_tracer_shape(all_tables, cases):
             counts, _ = np.histogram(changes[i], bins=edges)
             density = counts / max(changes[i].size, 1) / np.diff(edges)
             peak = cases[i]["area_change_peak"]
-            label = case_label(cases[i]) + ("" if peak is None else f": peak {peak:.3g}")
+            # a broad distribution's fullest bin says little: its median and spread instead
+            label = case_label(cases[i])
+            if changes[i].size:
+                label += (
+                    f": median {np.median(changes[i]):.2g}, "
+                    f"|ΔA/A| 90 % {np.percentile(np.abs(changes[i]), 90):.2g}"
+                )
             ax.stairs(np.where(density > 0, density, np.nan), edges, color=colors[i], label=label)
             series.append({"label": case_label(cases[i]), "pdf": density.tolist(), "peak": peak})
         ax.set_yscale("log")
@@ -76,12 +85,37 @@ def draw_tracer_shape(all_tables, cases):
         ax.grid(True, which="major", alpha=0.3)
         ax.legend(fontsize=6)
         letter = next(letters)
-        panel_title(ax, letter, f"ΔA / A, {regime}; bins of {width / pixel_step:.0f} px²")
+        whole = (
+            f"A ≈ {1.0 / pixel_step:.3g} px²: whole pixels, ΔA/A moves in steps of {pixel_step:.2g}"
+        )
+        panel_title(ax, letter, f"ΔA / A, {regime}; bins of {width / pixel_step:.0f} px² ({whole})")
         panels[letter] = {"bin_edges": edges.tolist(), "series": series}
     for col, (regime, members) in enumerate(regimes):
         ax = axes[1, col]
+        letter = next(letters)
+        area_ref = np.concatenate([kept[i]["area_ref"] for i in members])
+        area_ref = area_ref[area_ref > 0]
+        typical = float(np.median(area_ref)) if area_ref.size else 0.0
+        if typical < SHAPE_MIN_AREA_PX:
+            ax.set_axis_off()
+            ax.text(
+                0.5,
+                0.5,
+                f"({letter}) circularity not drawn: the images cover about {typical:.3g} px², "
+                "and the perimeter of a blob of a few whole pixels is a pixel count, not a "
+                f"shape (below {SHAPE_MIN_AREA_PX:g} px²)",
+                ha="center",
+                va="center",
+                wrap=True,
+                fontsize=8,
+                transform=ax.transAxes,
+            )
+            panels[letter] = {"not_drawn": True, "median_area_px": typical}
+            continue
         series = []
         samples = [kept[i]["circularity_meas"] for i in members]
+        references = np.concatenate([kept[i]["circularity_ref"] for i in members])
+        references = references[np.isfinite(references)]
         pooled = np.concatenate(samples)
         pooled = pooled[np.isfinite(pooled)]
         low, high = (pooled.min(), pooled.max()) if pooled.size else (0.5, 1.5)
@@ -96,18 +130,28 @@ def draw_tracer_shape(all_tables, cases):
             label = case_label(cases[i]) + ("" if peak is None else f": peak {peak:.3g}")
             ax.stairs(np.where(density > 0, density, np.nan), edges, color=colors[i], label=label)
             series.append({"label": case_label(cases[i]), "pdf": density.tolist(), "peak": peak})
+        undistorted = float(np.median(references)) if references.size else None
+        if undistorted is not None:
+            # a disc of a few whole pixels has a pixel perimeter: its C is not 1
+            ax.axvline(
+                undistorted, color="k", ls="--", lw=1, label=f"uniform medium: {undistorted:.3g}"
+            )
         ax.set_yscale("log")
         ax.xaxis.set_major_locator(MaxNLocator(5))
-        ax.set_xlabel("circularity C = P² / (4π A') (1: a disc)")
+        ax.set_xlabel("circularity C = P²/(4πA'); dashed: undistorted")
         ax.set_ylabel("PDF")
         ax.grid(True, which="major", alpha=0.3)
         ax.legend(fontsize=6)
-        letter = next(letters)
         panel_title(ax, letter, f"circularity, {regime}")
-        panels[letter] = {"bin_edges": edges.tolist(), "series": series}
+        panels[letter] = {
+            "bin_edges": edges.tolist(),
+            "series": series,
+            "undistorted_median": undistorted,
+        }
     figure_title(
         figure,
-        "Tracer image shape (ΔA/A peak: fullest whole-pixel bin; C peak: kernel density mode)",
+        "Tracer image shape: area change against the uniform medium's image, and circularity "
+        "beside the undistorted image's (a pixelated disc is not 1)",
         fontsize=9,
     )
     return figure, {"panels": panels}

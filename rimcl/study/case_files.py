@@ -19,6 +19,7 @@ RUN_ONLY_KEYS = (
     ("run", "scheduler"),
     ("run", "shard_tracers"),
     ("run", "engine"),
+    ("run", "sensitivity"),
 )
 #: Key of a case file's recorded configuration holding the study's scene.
 SCENE_RECORD = "study_scene"

@@ -396,8 +396,13 @@ def measure_shard(plugin, config, stamp, case, shard, path, reference_path=None,
             config, run=dataclasses.replace(config.run, device=plugin.device)
         )
         reference = None if reference_path is None else _reference_for(reference_path, plugin)
+        # a candidate: a lens camera's reference depends on the case's mean index too
         result = run_render(
-            plugin.source, case=case, config=config, reference=reference, shard=shard
+            plugin.source,
+            case=case,
+            config=config,
+            reference=None if reference is None else [reference],
+            shard=shard,
         )
         result.config[SCENE_RECORD] = json.loads(stamp)
         write_shard(path, result, stamp)

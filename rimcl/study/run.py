@@ -414,7 +414,9 @@ def run_study(
                 connected=scene_file.settle,
             )
             todo = []  # the cluster measured every case
-        references = {}  # threshold -> reference images (they depend on it, not on the case)
+        # reference images: they depend on the threshold, not on the case (a lens camera's
+        # and Mie weights' also on the case's mean index); the one that fits is reused
+        references = []
         for index, (name, case) in enumerate(todo, start=1):
             path = case_path(out_dir, name)
             step = f"[{index}/{len(cases)}] {name}"
@@ -426,15 +428,15 @@ def run_study(
             say(f"{step}: " + (f"{path.name} {reason}; measuring again" if reason else "measuring"))
             case_start = time.perf_counter()
             config = study.measure(name)
-            threshold = config.renderer.threshold
             result = run_render(
                 study.field_path or None,
                 case=case,
                 config=config,
-                reference=references.get(threshold),
+                reference=references,
                 progress=progress,
             )
-            references[threshold] = result.reference
+            if all(r is not result.reference for r in references):
+                references.append(result.reference)
             result.config[SCENE_RECORD] = comparable_scene(study)
             scene_file.settle()
             write_render(path, result, overwrite=True)
@@ -443,6 +445,14 @@ def run_study(
             say(f"{step}: done in {seconds[name]:.1f} s")
         if cases:
             scene_file.settle()  # every case file checked, or measured
+        variant_files = {}
+        if study.run.sensitivity and cases:
+            from rimcl.study.sensitivity import measure_variants
+
+            variant_files, measured = measure_variants(
+                study, out_dir, cases, force=force, progress=progress, say=say
+            )
+            ran += [f"sensitivity/{name}" for name in measured]
         piv_files = []
         if mode != "ptv":
             from rimcl.piv.study import run_study_cases
@@ -469,7 +479,9 @@ def run_study(
                     out_dir, stats, ran, skipped, seconds, False, time.perf_counter() - started
                 )
         say("statistics and figures" if figures else "statistics")
-        stats = write_study_outputs(out_dir, study, case_files, figures, piv_files, progress)
+        stats = write_study_outputs(
+            out_dir, study, case_files, figures, piv_files, progress, variant_files
+        )
     return StudyResult(out_dir, stats, ran, skipped, seconds, True, time.perf_counter() - started)
 
 
@@ -523,10 +535,13 @@ def _numerics_case(study, names):
     return next((name for name in names if name in CASES or name.startswith("G=")), None)
 
 
-def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=(), progress=False):
+def write_study_outputs(
+    out_dir, study, case_files, figures=True, piv_files=(), progress=False, variant_files=None
+):
     """``stats.json``, the figures and ``summary.md`` (last) of finished case files
-    (PTV render files, PIV case files); ``progress``: a progress bar over the steps (on a
-    terminal).
+    (PTV render files, PIV case files; ``variant_files``: the sensitivity variants' render
+    files, :func:`rimcl.study.sensitivity.measure_variants`); ``progress``: a progress bar
+    over the steps (on a terminal).
 
     Returns
     -------
@@ -557,6 +572,10 @@ def write_study_outputs(out_dir, study, case_files, figures=True, piv_files=(), 
             bar.update()
         all_tables = check_cases(all_tables)
         stats = compute_stats(all_tables, config=config)
+        if variant_files:
+            from rimcl.study.sensitivity import add_variants
+
+            add_variants(stats, variant_files)
         for case in stats["cases"]:
             case["physical_equivalent"] = physical_equivalents(
                 case["delta_n_max"], study.shared.fluid

@@ -12,6 +12,7 @@ import math
 from datetime import datetime, timezone
 
 from rimcl import __version__
+from rimcl.stats.summaries import INFLUENCE_LIMIT
 from rimcl.study.answer import answer_lines, lens_lines, scene_warnings, warning_lines
 
 PAPER_SOURCE = (
@@ -117,21 +118,44 @@ def _table(header, rows):
     return [line(header), "|" + "---|" * len(header), *(line(row) for row in rows)]
 
 
-def _case_row(case):
-    """The paper's statistics of one case: position peak, u3 and a3 mean and spread."""
-    velocity, acceleration = case["velocity"]["u3"], case["acceleration"]["a3"]
+def _ratio_cell(case, path, summary, key):
+    """A paper's ratio statistic with its mark, its influence (the share of Σ(ε/truth)²
+    carried by the 3 largest rows) and its conditioned value beside it."""
+    text = _marked(case, path, _percent_of(summary, key))
+    share = summary.get("influence")
+    if share is not None and share > INFLUENCE_LIMIT and not text.endswith(NOT_CONVERGED):
+        text += f" {NOT_CONVERGED}"  # carried by a few rows, also where not followed over N
+    conditioned = summary.get("conditioned")
+    extras = []
+    if share is not None:
+        extras.append(f"top-3 share {significant(share, 2)}")
+    if conditioned is not None:
+        extras.append(f"conditioned {_percent_of(conditioned, key)}")
+    return f"{text} ({'; '.join(extras)})" if extras else text
+
+
+def _case_row(case, block=None):
+    """The paper's statistics of one case: position peak, u3 and a3 mean and spread, of
+    the refraction errors or of another block of ``case`` (``against_truth``)."""
+    source = case if block is None else case[block]
+    velocity, acceleration = source["velocity"]["u3"], source["acceleration"]["a3"]
+    prefix = "" if block is None else f"{block}."
     return [
         case["name"],
         number(case["G"]),
         number(case["delta_n_max"]),
         f"{case['n_used']}/{case['n_tracers']}",
-        with_interval(
-            case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
+        _marked(
+            case,
+            "position_error_peak_over_L",
+            with_interval(
+                case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
+            ),
         ),
-        _marked(case, "velocity.u3.systematic", _percent_of(velocity, "systematic")),
-        _marked(case, "velocity.u3.random", _percent_of(velocity, "random")),
-        _marked(case, "acceleration.a3.systematic", _percent_of(acceleration, "systematic")),
-        _marked(case, "acceleration.a3.random", _percent_of(acceleration, "random")),
+        _ratio_cell(case, f"{prefix}velocity.u3.systematic", velocity, "systematic"),
+        _ratio_cell(case, f"{prefix}velocity.u3.random", velocity, "random"),
+        _ratio_cell(case, f"{prefix}acceleration.a3.systematic", acceleration, "systematic"),
+        _ratio_cell(case, f"{prefix}acceleration.a3.random", acceleration, "random"),
     ]
 
 
@@ -211,11 +235,13 @@ def _convergence_lines(cases):
     lines = [
         "## Convergence with the number of tracers",
         "",
-        f"`{NOT_CONVERGED}` marks a statistic that keeps growing with the number of tracers "
-        "N: its magnitude grows over N/4 < N/2 < N (nested random subsamples) and its value "
-        "at N lies outside the 95 % interval at N/4. Such a number describes the slowest "
-        "tracers of this sample, not the measurement; `stats.json` holds every statistic "
-        "against N under `convergence`, and `figures/convergence.png` draws them.",
+        f"`{NOT_CONVERGED}` marks a statistic that has not converged with the number of "
+        "tracers N: its value at N lies outside the 95 % interval at N/4 or at N/2 (nested "
+        "random subsamples; a jump either way), or, for the paper's systematic and random "
+        "errors, its 3 largest rows carry more than half of Σ(ε/truth)² (a truth near "
+        "zero). Such a number describes a few tracers of this sample, not the measurement; "
+        "`stats.json` holds every statistic against N under `convergence` (with the reasons), "
+        "and `figures/convergence.png` draws them.",
         "",
     ]
     for case in cases:
@@ -223,6 +249,67 @@ def _convergence_lines(cases):
         names = ", ".join(f"`{name}`" for name in growing) if growing else "none"
         lines.append(f"- {case['name']}: not converged: {names}")
     return [*lines, ""]
+
+
+#: Headline numbers of the sensitivity table: (stats path, heading).
+SENSITIVITY_HEADINGS = (
+    ("position_error_median_over_L", "median |ε_x|/L"),
+    ("velocity.u3.rms_normalized", "u3 rms ratio"),
+    ("velocity_fit.u3.rms_normalized", "u3 fit rms ratio"),
+    ("acceleration.a3.rms_normalized", "a3 rms ratio"),
+    ("acceleration_fit.a3.rms_normalized", "a3 fit rms ratio"),
+)
+
+
+def _sensitivity_cell(band, path):
+    if band is None or band["value"] is None:
+        return "n/a"
+    scale, unit = (1.0, "") if "." not in path else (100.0, " %")
+    text = with_interval(band["value"], band["ci95"], scale, unit)
+    return f"{text}: **{band['text']}**" if band["text"] != "n/a" else text
+
+
+def _sensitivity_lines(cases, study):
+    """Each headline number with its verdict against the settings' variants."""
+    with_bands = [case for case in cases if "sensitivity" in case]
+    if not with_bands:
+        return []
+    ran = sorted({name for case in with_bands for name in case["sensitivity"]["variants"]})
+    lines = [
+        "## Sensitivity to settings",
+        "",
+        "The bootstrap interval says how a number moves with the tracers; the settings a "
+        "user chooses move it too. Each headline number (refraction errors) under: "
+        + ", ".join(f"*{name}*" for name in ran)
+        + ". **stable**: every variant inside the 95 % interval (*stable against X*: only "
+        "X was tried); otherwise *depends on X by Y %* names the variant that moves it "
+        "most. *excluded by optics*: the tracers left out (flagged) counted with their "
+        "optics error. ",
+    ]
+    if not study.run.sensitivity:
+        lines[-1] += (
+            "The threshold ×½ and ×2, the other interpolation and rays ×4 need the case "
+            "measured again (4 studies more): `rimcl study --sensitivity`."
+        )
+    else:
+        lines[-1] += (
+            "Threshold ×½ and ×2, the other interpolation (trilinear ↔ bspline3) and rays "
+            "×4: each case measured again (`sensitivity/<variant>/cases/<case>.h5`); "
+            "`stats.json`: `sensitivity` per case."
+        )
+    lines.append("")
+    header = ["case", *(heading for _, heading in SENSITIVITY_HEADINGS)]
+    rows = [
+        [
+            case["name"],
+            *(
+                _sensitivity_cell(case["sensitivity"]["bands"].get(path), path)
+                for path, _ in SENSITIVITY_HEADINGS
+            ),
+        ]
+        for case in with_bands
+    ]
+    return [*lines, *_table(header, rows), ""]
 
 
 def _physical_lines(cases):
@@ -288,10 +375,21 @@ def summary_markdown(stats, study):
     first = cases[0]
     camera, renderer = study.shared.camera, study.shared.renderer
     rays = (
-        f"plane camera, {camera.fan}×{camera.fan} rays per tracer"
+        f"plane camera (the paper's fan, NA ≈ 0.8), {camera.fan}×{camera.fan} rays per tracer"
         if camera.kind == "plane"
         else f"{camera.kind} camera, {camera.pupil_rays} rays per tracer"
     )
+    if camera.kind == "lens":
+        f_number = 8.0 if camera.f_number is None else camera.f_number
+        wall = camera.window_thickness_mm
+        rays = (
+            f"lens camera ({camera.focal_length_mm:g} mm f/{f_number:g}"
+            + (f", M = {camera.magnification:g}" if camera.magnification else "")
+            + f", {camera.sensor_pixels[0]}×{camera.sensor_pixels[1]} pixels of "
+            f"{camera.pixel_pitch_um:g} µm, behind "
+            + (f"a {wall:g} mm wall" if wall else "the bare fluid/air interface")
+            + f"), {camera.pupil_rays} rays per tracer"
+        )
     field = study.field_path or "the shipped 64³ sample (buoyancy-driven mixing)"
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     devices = ", ".join(
@@ -301,8 +399,13 @@ def summary_markdown(stats, study):
         f"# rimcl study: {len(cases)} cases",
         "",
         f"rimcl {__version__}, {stamp}. Field: {field}. {study.shared.tracers.count} tracers, "
-        f"{rays}, {renderer.kind} renderer, {renderer.pixels} pixels "
-        f"across the field of view (pixel = {first['pixel_size_over_L']:.3g} L), "
+        f"{rays}, {renderer.kind} renderer"
+        + (f", {renderer.pixels} pixels across the field of view" if camera.kind != "lens" else "")
+        + f" (pixel = {first['pixel_size_over_L']:.3g} L), Mie weights "
+        + ("on" if study.shared.mie.enabled else "off")
+        + ", sensor noise "
+        + ("on" if study.shared.sensor.noise else "off")
+        + f", {renderer.bit_depth} bits, "
         f"L = {first['length_L']:.4g}, Δt = {first['dt']:.3g}.",
         f"Device: {devices}. Configuration: `scene.toml`; every number and the software "
         "versions: `stats.json` (one row per statistic: `stats.csv`); figures with their "
@@ -328,12 +431,21 @@ def summary_markdown(stats, study):
             number(case["G"]),
             number(case["delta_n_max"]),
             f"{case['n_used']}/{case['n_tracers']}",
-            with_interval(
-                case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
+            _marked(
+                case,
+                "position_error_peak_over_L",
+                with_interval(
+                    case["position_error_peak_over_L"],
+                    case.get("position_error_peak_over_L_ci95"),
+                ),
             ),
-            with_interval(
-                case["position_error_median_over_L"],
-                case.get("position_error_median_over_L_ci95"),
+            _marked(
+                case,
+                "position_error_median_over_L",
+                with_interval(
+                    case["position_error_median_over_L"],
+                    case.get("position_error_median_over_L_ci95"),
+                ),
             ),
         ]
         for case in cases
@@ -357,14 +469,17 @@ def summary_markdown(stats, study):
         lines += [f"**{heading}**", "", *_table(header, _headline_rows(cases, group, component))]
         lines.append("")
     lines += _budget_lines(cases)
+    lines += _sensitivity_lines(cases, study)
     lines += [
         "## The paper's statistics",
         "",
         "*Systematic* = mean of `ε/truth`, *random* = its standard deviation: the paper's "
-        "definitions, for the `x3` components, in percent, with bootstrap 95 % intervals. "
-        "Both are ratios whose denominators come close to zero for some tracers, so they "
-        f"are dominated by the few slowest tracers; `{NOT_CONVERGED}` marks the ones that "
-        "keep growing with the number of tracers.",
+        "statistics, for the `x3` components, in percent, with bootstrap 95 % intervals, of "
+        "the refraction errors (`ε = u' − u^ref`). Both are ratios whose denominators come "
+        "close to zero for some tracers, so a few slow tracers can carry them: beside each, "
+        "the share of Σ(ε/truth)² its 3 largest rows carry (*top-3 share*; 1 means one "
+        "tracer is the number) and the conditioned value (|truth| ≥ ½ rms). "
+        f"`{NOT_CONVERGED}` marks the ones that have not converged (below).",
         "",
     ]
     header = [
@@ -395,7 +510,10 @@ def summary_markdown(stats, study):
         "of homogeneous buoyancy-driven turbulence (Re = 12500) over its own depth L, with "
         "1e5 tracers, 100×100 rays each and 8192² pixels; this study uses the field, depth "
         "and sizes above. Only orders of magnitude and trends with G can agree; no "
-        "agreement of the numbers themselves is expected.",
+        "agreement of the numbers themselves is expected. The paper's errors are against "
+        "the truth (`ε = u' − u`, refraction plus the finite-difference baseline): rimcl's "
+        "rows give both definitions, *vs truth* (the paper's) and *vs reference* "
+        "(refraction alone).",
         "",
     ]
     by_name = {case["name"]: case for case in cases}
@@ -424,9 +542,12 @@ def summary_markdown(stats, study):
         case = by_name.get(name)
         if case is None:
             rows.append([f"rimcl, {name}", *["not run"] * 6])
-        else:
-            row = _case_row(case)
-            rows.append([f"rimcl, {name}", row[2], row[4], *row[5:]])
+            continue
+        row = _case_row(case)
+        if "against_truth" in case:
+            truth_row = _case_row(case, "against_truth")
+            rows.append([f"rimcl, {name}, vs truth (the paper's ε)", row[2], "—", *truth_row[5:]])
+        rows.append([f"rimcl, {name}, vs reference (refraction)", row[2], row[4], *row[5:]])
     lines += _table(header, rows)
     lines += ["", f"Paper: {PAPER_SOURCE}. Where: {PAPER_CITATIONS}", ""]
     return "\n".join(lines + piv_lines(stats))
