@@ -388,7 +388,7 @@ def run_piv_render(
         sensor_model = (SensorConfig() if sensor is None else sensor).build(
             imaging.bit_depth, piv.seed
         )
-        mie_weights = None if mie is None else mie.build(fluid)
+        mie_weights = None if mie is None else mie.build(None if fluid is None else fluid.build())
         grid = WindowGrid.for_image(
             imaging.frame_shape(scene, cam), int(settings.window), float(settings.overlap)
         )

@@ -223,7 +223,7 @@ def run_piv_sequence(
                 run.rays_per_batch,
                 engine=run.engine,
                 sensor=model,
-                mie=None if mie is None else mie.build(fluid),
+                mie=None if mie is None else mie.build(None if fluid is None else fluid.build()),
                 noise=(MEASURED_PASS, 0),
                 bar=bar,
             )
