@@ -17,13 +17,13 @@ time per tracer image of the device engine (the main thread's CPU time in the en
 frame loop: preparing batches, reading rows, forming columns; the run's fixed ray sample
 excluded), rays per second end to end
 (rays traced / wall time, reference included), and the ratio of the wall times
-numpy / device. Machines drift by 30-40 % from minute to minute (DESIGN §11): only the
+numpy / device. Machines drift by 30-40 % from minute to minute: only the
 ratios of one run mean anything.
 
     python benchmarks/pipeline.py                      # default device
     python benchmarks/pipeline.py --device nvidia --paper-tracers 300 --json gpu.json
     python benchmarks/pipeline.py --profile            # + cProfile of the device engine's host
-    python benchmarks/pipeline.py --device nvidia --scale-run 100000   # + DESIGN §14's run
+    python benchmarks/pipeline.py --device nvidia --scale-run 100000   # + the paper-scale run
 
 ``--scale-run N`` adds, on the device engine only, one case (C1) of ``N`` tracers x 1e4
 rays x 3 frames plus its reference, end to end (the H100 target: 1e5 tracers in under

@@ -1,6 +1,6 @@
 """Ray-steps per second of rimcl.trace_rays, as ratios to a float64 numba baseline.
 
-DESIGN §11: the machines drift by 30-40 % from minute to minute, so only ratios measured
+the machines drift by 30-40 % from minute to minute, so only ratios measured
 in one run mean anything. This script times, on one field and one ray set, interleaved:
 
 - the numba float64 implementation of the same method (``rimcl.optics.baseline``: trilinear,
@@ -11,7 +11,7 @@ in one run mean anything. This script times, on one field and one ray set, inter
 - ``rimcl.trace_rays`` with every interpolation x precision the device supports, each
   with the kernel shape ``trace_rays`` chooses for it (warm: kernel build and field
   upload excluded);
-- on CPUs, the kernel shapes of DESIGN §11 (rays per work-item, the PoCL switch) for the
+- on CPUs, the kernel shapes (rays per work-item, the PoCL switch) for the
   default trilinear f32c: 1, 8 and 16 rays per work-item with and without the switch
   (16 with it is the default and the device engine's fan kernel,
   ``rimcl.imaging.engine.FAN_CPU_LANES``).
@@ -90,7 +90,7 @@ def main():
         and (precision != "f64" or has_fp64(device))
     ]
     default = ("trilinear", "f32c", default_kernel_shape(device))
-    if default[2].lanes > 1:  # the kernel shapes of DESIGN §11, and the device engine's
+    if default[2].lanes > 1:  # the kernel shapes, and the device engine's
         shapes = (
             (1, False),
             (1, True),

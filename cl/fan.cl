@@ -1,7 +1,7 @@
 /*
  * fan.cl -- a camera's rays from a batch of tracers, made, traced and imaged on the device.
  *
- * The device engine's first stage (DESIGN §14). Ray g of the batch belongs to tracer
+ * The device engine's first stage. Ray g of the batch belongs to tracer
  * g / K and aims at the camera's aim point g % K (K rays per tracer). Slot s of the batch
  * (lane s % RIMCL_LANES of work-item s / RIMCL_LANES) traces ray (s / K) K + order[s % K]:
  * `order` groups rays of similar path length in a work-item, whose lanes all step until

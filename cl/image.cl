@@ -1,7 +1,7 @@
 /*
  * image.cl -- tracer images rendered, digitised and located on the device, one row each.
  *
- * The device engine's second stage (DESIGN §14), the NumPy engine's image_batch
+ * The device engine's second stage, the NumPy engine's image_batch
  * (rimcl/imaging/frames.py) in one kernel: for each tracer of a batch, from the image points of
  * its rays (fan.cl, in pixels), the window (rimcl/imaging/render.py Renderer.window_for: bounding
  * box plus the PSF pad, capped at max_window around the floor of the median image point),

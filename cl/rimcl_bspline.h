@@ -3,7 +3,7 @@
  *
  * Purpose: field_sample(p) for RIMCL_INTERP == RIMCL_INTERP_BSPLINE3 (included by
  * rimcl_field.h, not on its own). n and grad n come from the same C2 spline, so they
- * are consistent (DESIGN §4.3); 4 x 4 x 4 = 64 coefficients per sample.
+ * are consistent; 4 x 4 x 4 = 64 coefficients per sample.
  * The coefficients are prefiltered on the host (rimcl/fields/bspline.py) so that the spline
  * interpolates delta_n at the nodes:
  *   RIMCL_PERIODIC 0: array (n3 + 3, n2 + 3, n1 + 3), coefficient of node i at index

@@ -239,8 +239,8 @@ RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample 
 #if RIMCL_POCL_FAST
 /* Ask the CPU to fetch the cells at the positions p of the active lanes into its cache
  * (a ray's next cells are known a step ahead: the path bends little over a step). Fields
- * are usually larger than the cache, and a field that fits runs 20-30 % faster
- * (DESIGN §11); measured here: +15-40 % on 128^3 nodes, -8 % when the field fits. */
+ * are usually larger than the cache, and a field that fits runs 20-30 % faster;
+ * measured here: +15-40 % on 128^3 nodes, -8 % when the field fits. */
 RIMCL_INLINE void field_prefetch_lanes(FIELD_ARGS, lvec3 p, lmask active)
 {
     lreal w1, w2, w3;

@@ -2,7 +2,7 @@
  * rimcl_inline.h -- helper functions inlined on every device; the PoCL switch.
  *
  * Purpose: RIMCL_INLINE, the storage class of every helper function, and the double
- * precision builtins that PoCL's pip build leaves as library calls (DESIGN §11), so that
+ * precision builtins that PoCL's pip build leaves as library calls, so that
  * loops calling them vectorise: dbl_floor, dbl_rint, dbl_fabs.
  * Optional define: RIMCL_POCL_FAST 1 on PoCL (forced inlining, clang builtins), 0
  *   (default; GPUs) standard functions. No kernels here. Units: none.

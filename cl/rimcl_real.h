@@ -9,7 +9,7 @@
  * Optional defines:
  *   RIMCL_LANES      rays advanced together by one work-item, in the lanes of vector
  *                    types: 1 (default; GPUs), 2, 4, 8 or 16 (CPUs, where one ray per
- *                    work-item is latency-bound: DESIGN §11).
+ *                    work-item is latency-bound).
  *   RIMCL_POCL_FAST  1 on PoCL (CPUs): helpers forced inline, clang builtins
  *                    (__builtin_floorf, __builtin_elementwise_floor,
  *                    __builtin_convertvector) in place of OpenCL library calls that

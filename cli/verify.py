@@ -1,4 +1,4 @@
-"""``rimcl verify``: the closed-form verification suite (DESIGN §5)."""
+"""``rimcl verify``: the closed-form verification suite."""
 
 import json
 

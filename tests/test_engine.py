@@ -1,4 +1,4 @@
-"""The device engine against the NumPy engine (DESIGN §14): same flags, same centroids.
+"""The device engine against the NumPy engine: same flags, same centroids.
 
 Where the digitised images of the two engines are identical (compared through the frame
 image of all windows), centroids must be identical to the last bit (the device returns

@@ -1,4 +1,4 @@
-"""The device engine through a lens camera, with and without a flat window (DESIGN §14).
+"""The device engine through a lens camera, with and without a flat window.
 
 Both engines image the shipped sample through the same :class:`rimcl.optics.camera.LensCamera`:
 the device makes the initial directions (behind a window: the same Newton solve as

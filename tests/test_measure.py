@@ -167,7 +167,7 @@ def test_linear_medium_shift_matches_float64_rays(linear_file, device):
 
 
 def test_slab_optics_error_is_the_closed_form_and_imaging_adds_little(linear_file, device):
-    """DESIGN §15: a uniform transverse gradient shifts every image point by
+    """A uniform transverse gradient shifts every image point by
     Δ = -L² (∂n/∂x2) / (2 n0); the optics mean carries it, the camera adds < 1 % at 16 bits."""
     result = render(
         linear_file,

@@ -41,7 +41,7 @@ def test_water_density_continuous_at_the_switch():
 
 
 def test_water_dn_dt_at_20c_532nm():
-    # DESIGN §16: -9.1e-5 /K
+    # -9.1e-5 /K
     slope = _dn_dt(lambda t: media.water_index(t, 532.0), 20.0)
     assert round(float(slope), 6) == -9.1e-5
 
@@ -74,7 +74,7 @@ def test_saturation_vapour_pressure_if97_check_value():
 
 
 def test_air_dn_dt_is_the_ideal_gas_value():
-    # n - 1 ∝ density ∝ 1/T: dn/dT = -(n - 1)/T, about -9e-7 /K at 20 °C (DESIGN §16)
+    # n - 1 ∝ density ∝ 1/T: dn/dT = -(n - 1)/T, about -9e-7 /K at 20 °C
     slope = float(_dn_dt(lambda t: media.air_index(t, wavelength_nm=532.0), 20.0))
     ideal = -(float(media.air_index(20.0, wavelength_nm=532.0)) - 1.0) / 293.15
     assert slope == pytest.approx(ideal, rel=5e-3)

@@ -76,7 +76,7 @@ def _slab(g, n0, counts, lo, spacing):
 
 
 def test_growing_transverse_gradient_matches_the_closed_form(device):
-    # DESIGN §15: a slab of depth L with uniform ∂n/∂x2 shifts every image point by
+    # a slab of depth L with uniform ∂n/∂x2 shifts every image point by
     # Δ = -L² (∂n/∂x2) / (2 n); a gradient changing between exposures shifts every PIV
     # vector by the change of Δ
     n0, depth, x_sheet = 1.33, 1.0, 0.05

@@ -46,7 +46,7 @@ def test_sample_gives_accelerations_above_the_rounding_floor_at_frames_0_04_apar
     tracks = integrate_tracks(velocity, start, times)
     truth = track_acceleration(velocity, tracks, times)[window // 2]
     rms = np.sqrt(np.mean(truth**2))
-    # 10-bit rounding moves centroids by a few 1e-4 px per frame (DESIGN §13): with 5e-4 px
+    # 10-bit rounding moves centroids by a few 1e-4 px per frame: with 5e-4 px
     # the fit's acceleration noise is 0.3 % of rms(a) (measured; rms(a) Δt² is 0.033 px),
     # where the three-frame difference at Δt = 0.005 gave 176 %
     assert fit_noise_std(window, 2, dt, 5e-4 * pixel)[2] < 0.02 * rms

@@ -53,7 +53,7 @@ def test_a_band_reads_stable_inside_the_interval_and_names_the_largest_move():
     assert inside["stable"] and inside["text"] == "stable against threshold ×½, rays ×4"
     every = {name: {path: 0.33} for name in (EXCLUDED_BY_OPTICS, *MEASURED_VARIANTS)}
     assert bands(case, every)[path]["text"] == "stable"
-    # C4's threshold dependence (DESIGN §18: 14.7 / 32.0 / 37.7 %) shows
+    # C4's threshold dependence (14.7 / 32.0 / 37.7 %) shows
     moved = bands(case, {"threshold ×½": {path: 0.147}, "threshold ×2": {path: 0.377}})[path]
     assert not moved["stable"]
     assert moved["text"] == "depends on threshold ×½ by -54 %"

@@ -109,7 +109,7 @@ def test_fourth_order_convergence(device, has_fp64):
 
 
 def test_gridded_fisheye_on_the_lens_only_grid(device):
-    """DESIGN §5: 512² grid over [-0.05, 1.05] x [-1.05, 1.05], θ0 in [π/3, π/2]."""
+    """512² grid over [-0.05, 1.05] x [-1.05, 1.05], θ0 in [π/3, π/2]."""
     lens = analytic_field("fisheye", n_max=2.0)
     field = lens.on_grid((512, 512, 1), (-0.05, -1.05, 0.0), (1.05, 1.05, 0.0), n_ref=1.0)
     theta = np.linspace(np.pi / 3, np.pi / 2, 6)
@@ -180,7 +180,7 @@ def test_f64_kernel_is_the_float64_twin(device, has_fp64):
 
 
 def test_n_metric_explains_the_deflection(device):
-    """|Δθ| ≈ |N| S for small deflections (DESIGN §3)."""
+    """|Δθ| ≈ |N| S for small deflections."""
     field = smooth_random_field(3e-4, seed=8)
     rng = np.random.default_rng(4)
     origins = np.column_stack([np.zeros(30), rng.uniform(0.5, 1.5, (30, 2))])

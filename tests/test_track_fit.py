@@ -54,7 +54,7 @@ def test_fit_recovers_a_polynomial_track_of_its_order_exactly(window, order):
 
 def test_fit_bias_of_a_quartic_is_the_closed_form():
     # x = (t - t_c)^4 about the centre: a(t_c) = 0, while a quadratic fit over k = -3..3
-    # returns 2 Δt² Σ(k² - 4) k⁴ / Σ(k² - 4)² = 2 Δt² 804/84 (DESIGN: bias ∝ Δt² d⁴x/dt⁴)
+    # returns 2 Δt² Σ(k² - 4) k⁴ / Σ(k² - 4)² = 2 Δt² 804/84 (bias ∝ Δt² d⁴x/dt⁴)
     dt = 0.04
     offsets = dt * (np.arange(7) - 3.0)
     positions = np.broadcast_to((offsets**4)[:, None, None], (7, 1, 2))

@@ -119,27 +119,6 @@ _LITERAL = re.compile(r"(``.+?``)")
 _TRAILING_UNDERSCORE = re.compile(r"(?<=\w)_(?=\||[\s,.;:)]|$)")
 
 
-# Docstrings cite the project's design notes by section ("DESIGN §6.2"); the notes are not
-# part of the repository, so the pages leave the citations out.
-_CITE = r"DESIGN §[\d.–-]+(?:, §[\d.–-]+)*"
-_CITATIONS = (
-    (re.compile(rf"\s*\({_CITE}\)"), ""),  # "(DESIGN §6)"
-    (re.compile(rf"\({_CITE}[:;,]\s*"), "("),  # "(DESIGN §13: the ..." -> "(the ..."
-    (re.compile(rf"[,;]\s*{_CITE}(?=[);])"), ""),  # "plane, DESIGN §6.2)" -> "plane)"
-    (re.compile(rf",\s*{_CITE};"), ";"),  # "Gaussian, DESIGN §15; the" -> "Gaussian; the"
-    (re.compile(rf"\s*{_CITE}"), ""),
-)
-
-
-def drop_design_citations(app, what, name, obj, options, lines):
-    """Remove citations of the design notes, which are not in the repository."""
-    for i, line in enumerate(lines):
-        if "DESIGN" in line:
-            for pattern, replacement in _CITATIONS:
-                line = pattern.sub(replacement, line)
-            lines[i] = line
-
-
 def _plain(text):
     return _TRAILING_UNDERSCORE.sub(r"\\_", text).replace("|", "\\|")
 
@@ -160,6 +139,5 @@ def escape_bars(app, what, name, obj, options, lines):
 
 def setup(app):
     app.connect("builder-inited", write_generated)
-    app.connect("autodoc-process-docstring", drop_design_citations, priority=390)
     app.connect("autodoc-process-docstring", escape_bars, priority=400)
     return {"parallel_read_safe": True, "parallel_write_safe": True}

@@ -1,4 +1,4 @@
-"""Cubic B-spline coefficients of ``δn`` for the ``bspline3`` interpolation (DESIGN §4.3).
+"""Cubic B-spline coefficients of ``δn`` for the ``bspline3`` interpolation.
 
 The kernel (``cl/rimcl_bspline.h``) evaluates ``δn`` and its analytic gradient from one
 float32 coefficient per node, so ``n`` and ``∇n`` are consistent (one C² spline) and the

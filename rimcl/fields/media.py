@@ -1,4 +1,4 @@
-"""Refractive index of real fluids in physical units (DESIGN §16).
+"""Refractive index of real fluids in physical units.
 
 Three formulations, each written from its publication:
 

@@ -1,4 +1,4 @@
-"""Locate a tracer in its image and describe its shape, as a PTV code does (DESIGN §6.4).
+"""Locate a tracer in its image and describe its shape, as a PTV code does.
 
 Pixels above the grey threshold are grouped into 8-connected components; the component
 holding the most light is the tracer. Its position is the grey-weighted centroid, its

@@ -1,4 +1,4 @@
-"""The device imaging engine's image stage: ``cl/image.cl`` on its host side (DESIGN §14).
+"""The device imaging engine's image stage: ``cl/image.cl`` on its host side.
 
 :class:`DeviceImager` holds the image kernel, its scratch slots and buffers; for a batch of
 tracers whose rays' image points are on the device (``cl/fan.cl`` of

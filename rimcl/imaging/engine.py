@@ -1,4 +1,4 @@
-"""The device engine: rays stay on the OpenCL device from launch to per-tracer rows (DESIGN §14).
+"""The device engine: rays stay on the OpenCL device from launch to per-tracer rows.
 
 ``engine = "device"`` of a measurement. For each batch of tracers, two kernels run on the
 device and only per-tracer rows (and the small ray sample) come back:

@@ -1,8 +1,8 @@
 """The camera's side of a measurement: ray image points → per-tracer rows (NumPy engine).
 
-For a batch of tracers, each with the image points ``r'`` of its rays (DESIGN §6.2), this
+For a batch of tracers, each with the image points ``r'`` of its rays, this
 module renders each tracer's window image, digitises it, thresholds it and locates the
-tracer (DESIGN §6.3–6.4), and also forms the optics mean ``x_opt`` (DESIGN §13): the
+tracer, and also forms the optics mean ``x_opt``: the
 light-weighted mean of the collected rays' image points, without pixels.
 
 This is the readable reference engine (``engine = "numpy"``): one tracer at a time, in
@@ -79,7 +79,7 @@ class Imaging:
         bit depth: scale, round, clip).
     scaling : {"reference", "per_image"}
         ``reference``: each tracer's measured image uses the scale of its reference image
-        (comparable images; DESIGN §6.3); ``per_image``: every image is scaled to its own
+        (comparable images); ``per_image``: every image is scaled to its own
         peak, as the paper "rescaled to a 10-bit dynamic range" (a distorted image then
         keeps its full brightness and grows above the threshold).
     """

@@ -1,4 +1,4 @@
-"""Ray weights from Mie scattering by the tracer particles (DESIGN §13, paper §3.2).
+"""Ray weights from Mie scattering by the tracer particles (paper §3.2).
 
 A tracer in the light sheet scatters the sheet's light; a ray leaving it in the direction
 ``d`` carries the intensity scattered at the angle ``θ = arccos(k · d)`` between the sheet's

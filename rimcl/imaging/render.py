@@ -6,7 +6,7 @@ coordinates ``e = (x - origin) / pixel_size`` put pixel ``i`` at ``[i, i + 1)``,
 centre at ``i + 0.5``. Window images are arrays ``(rows, columns) = (x3, x2)``, the
 order of the field's ``(n3, n2)`` planes.
 
-Two renderers (DESIGN §6.3), both producing a grey image of the camera's bit depth
+Two renderers, both producing a grey image of the camera's bit depth
 (10 bits by default, as in the paper):
 
 - ``paper``: each ray adds its weight to the pixel holding its image point ``r'``; the

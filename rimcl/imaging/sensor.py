@@ -1,4 +1,4 @@
-"""A camera sensor: photoelectrons, shot and read noise, full well, gain and ADC (DESIGN §13).
+"""A camera sensor: photoelectrons, shot and read noise, full well, gain and ADC.
 
 Two modes:
 

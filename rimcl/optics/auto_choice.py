@@ -3,7 +3,7 @@
 A short calibration on a subset of the rays (evenly spread over the ray set) traces each
 candidate setting and a tighter reference, measures the largest difference of the image
 points ``r'`` between them, and keeps the cheapest candidate whose difference stays
-within the tolerance (DESIGN §4: model no more than a scene needs).
+within the tolerance (model no more than a scene needs).
 
 - ``step="auto"``: candidates are the default step (half a cell of arc) times
   ``4, 2, 1, 1/2, 1/4, 1/8``; the reference takes a quarter of the smallest. With a

@@ -7,7 +7,7 @@ plane, the same status rules; one ray per loop iteration, parallel over rays
 kernel). It computes no path integrals, so it does less work per step than the kernel.
 
 :func:`trace_rays_numba` is what ``benchmarks/speed.py`` times against
-:func:`rimcl.trace_rays` (DESIGN §11: only same-run ratios mean anything). numba is an
+:func:`rimcl.trace_rays` (only same-run ratios mean anything). numba is an
 optional dependency (``pip install "rimcl[test]"``).
 """
 

@@ -1,4 +1,4 @@
-"""``rimcl bench``: speed against accuracy of the tracing methods (DESIGN §4, §11).
+"""``rimcl bench``: speed against accuracy of the tracing methods.
 
 On a field (default: the shipped sample, as air ``C1`` and water ``C4``) and a ray set
 (the paper's camera: tracers in the sheet, an ``M x M`` fan of rays each), every
@@ -46,7 +46,7 @@ from rimcl.optics.trace import (
     run_trace,
 )
 
-#: The Gladstone–Dale cases benchmarked by default: air and water (DESIGN §2).
+#: The Gladstone–Dale cases benchmarked by default: air and water.
 DEFAULT_CASES = ("C1", "C4")
 #: The one case of a field file that stores δn (its own refractive index).
 DELTA_N_CASE = "delta_n"

@@ -2,8 +2,7 @@
 
 An ideal lens focused on the light sheet images every ray to the point where its straight
 backward extension meets the sheet (the back-projection done by :func:`rimcl.trace_rays`),
-so a camera model only decides which rays leave a tracer and which of them are collected
-(DESIGN §6.2):
+so a camera model only decides which rays leave a tracer and which of them are collected:
 
 - :class:`PlaneCamera` (the paper): rays aimed at an ``M x M`` equidistant grid of points
   on the exit plane covering the field of view; every ray is collected.
@@ -51,7 +50,7 @@ class Scene:
 
     @classmethod
     def from_grid(cls, origin, spacing, shape, boundary, x_sheet=None, depth=None):
-        """Default scene of a gridded field (DESIGN §6).
+        """Default scene of a gridded field.
 
         The sheet lies at the low ``x1`` edge of the grid and the exit plane one field
         depth ``L1`` beyond it (for a periodic box, one full period); the field of view is
@@ -504,7 +503,7 @@ class LensCamera:
     - depth of field ``δz = 4 (1 + 1/M)² N² λ``;
     - tracer image diameter ``d_τ = sqrt((M d_p)² + d_diff²)``, ``d_diff = 2.44 (1 + M) λ N``,
       on the sensor; the Gaussian PSF has ``σ = d_τ / 4`` (``d_τ`` is read as the e⁻²
-      diameter of a Gaussian, DESIGN §15; the best-fit Gaussian of an Airy disk alone is
+      diameter of a Gaussian; the best-fit Gaussian of an Airy disk alone is
       narrower, ``σ = 0.42 (1 + M) λ N ≈ d_diff / 5.8``).
 
     With a :class:`FlatWindow`, exit rays refract into the glass and out into the outside

@@ -1,7 +1,7 @@
 """Ray sets for ``rimcl trace`` and its HDF5 output.
 
 A ray set is either the paper's fan (random tracers in the light sheet, each with
-``M x M`` rays aimed at an equidistant grid on the exit plane, DESIGN §6.2) or rays read
+``M x M`` rays aimed at an equidistant grid on the exit plane) or rays read
 from a file. The output file holds one row per ray.
 """
 

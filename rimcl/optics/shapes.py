@@ -1,4 +1,4 @@
-"""Kernel shapes of the trace kernels, measured per device (DESIGN §11).
+"""Kernel shapes of the trace kernels, measured per device.
 
 A :class:`KernelShape` says how ``cl/trace.cl`` and ``cl/fan.cl`` are built and launched:
 rays per work-item (vector lanes), the PoCL switch and the work-group size. Every shape
@@ -54,7 +54,7 @@ TUNE_MODES = ("auto", "cache", "off")
 
 @dataclasses.dataclass(frozen=True)
 class KernelShape:
-    """How the trace kernels are built and launched on a device (DESIGN §11).
+    """How the trace kernels are built and launched on a device.
 
     Attributes
     ----------

@@ -5,7 +5,7 @@ Runge–Kutta–Nyström scheme and stops each ray exactly on the plane ``x1 = x
 this module prepares the inputs, runs the kernel in batches of bounded memory and turns
 the exit states into float64 results (back-projection, deflection, path integrals).
 
-Choices a call makes (DESIGN §4):
+Choices a call makes:
 
 - ``interp``: ``trilinear`` (software, float4 nodes ``δn, ∇n``), ``texture`` (the same
   nodes in an OpenCL image read with the hardware linear filter), ``bspline3`` (cubic
@@ -190,7 +190,7 @@ def angle_between(a, b):
 
 
 def default_step(field):
-    """Half a cell of arc: ``0.5 min(h) / n_ref`` (DESIGN §4.2); 1e-3 for closed forms."""
+    """Half a cell of arc: ``0.5 min(h) / n_ref``; 1e-3 for closed forms."""
     if isinstance(field, Field):
         return 0.5 * float(np.min(field.spacing)) / field.n_ref
     return 1e-3

@@ -1,4 +1,4 @@
-"""The verification suite (DESIGN §5): closed-form rays, analytic and gridded.
+"""The verification suite: closed-form rays, analytic and gridded.
 
 Every case traces a small fan of rays through a field whose rays are known exactly, in
 the kernel's precision modes, and compares the end points (or, in a uniform medium,
@@ -140,7 +140,7 @@ def _gridded_cases(analytic_cases):
         case = by_name[name]
         field = case.field.on_grid(counts, lo, hi)
         gridded.append(dataclasses.replace(case, field=field, grid="x".join(map(str, counts))))
-    # the lens-only 512² grid of DESIGN §5 holds the rays with θ0 in [π/3, π/2]
+    # the lens-only 512² grid holds the rays with θ0 in [π/3, π/2]
     fish = by_name["fisheye"]
     keep = np.arctan2(fish.directions[:, 0], fish.directions[:, 1]) <= np.pi / 2 + 1e-12
     field = fish.field.on_grid((512, 512, 1), (-0.05, -1.05, 0.0), (1.05, 1.05, 0.0), n_ref=1.0)

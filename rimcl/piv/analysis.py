@@ -1,4 +1,4 @@
-"""PIV: cross-correlation of an image pair into a displacement field (DESIGN §15).
+"""PIV: cross-correlation of an image pair into a displacement field.
 
 Usable on any image pair (``rimcl piv analyze A.tif B.tif``). The algorithm:
 

@@ -1,4 +1,4 @@
-"""Figures of PIV errors over refractive-index cases (DESIGN §7, §15).
+"""Figures of PIV errors over refractive-index cases.
 
 Each figure is written as ``<name>.png``, ``<name>.pdf`` (versions in the file metadata)
 and ``<name>.json`` (every number drawn, with configuration and versions), as

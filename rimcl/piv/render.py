@@ -1,5 +1,5 @@
 """PIV image pairs of one case through a refractive-index field, with their ground truth
-(:func:`run_piv_render`; DESIGN §15).
+(:func:`run_piv_render`).
 
 A PIV camera records full frames of many tracers lit by a light sheet of finite thickness:
 

@@ -1,4 +1,4 @@
-"""PIV errors of one refractive-index case: images, vectors, errors, statistics (DESIGN §15).
+"""PIV errors of one refractive-index case: images, vectors, errors, statistics.
 
 Per vector of the final PIV grid (pixels; ``dx`` along ``x2``, ``dy`` along ``x3``):
 
@@ -6,8 +6,8 @@ Per vector of the final PIV grid (pixels; ``dx`` along ``x2``, ``dy`` along ``x3
   vector measured on the same tracers seen through a uniform medium;
 - **optics** part of it: the window average (tracers weighted by ``I_A · I_B``, assigned by
   their true midpoint as the truth is) of the change between exposures of each tracer's
-  mean ray image point, through the field minus through the uniform medium (DESIGN §13:
-  no pixels, no correlation); ``refraction - optics`` is what imaging and correlation add;
+  mean ray image point, through the field minus through the uniform medium (no
+  pixels, no correlation); ``refraction - optics`` is what imaging and correlation add;
 - **baseline**: the uniform-medium vector minus the window-averaged true displacement (the
   PIV method's own error: finite windows, gradients, lost pairs, sub-pixel fit).
 

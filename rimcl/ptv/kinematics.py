@@ -35,7 +35,7 @@ def _frame_rows(ids, frames_used, columns, flags, notes, window):
 
 
 def kinematics_tables(ids, positions, truth, flags, notes, dt, time_config):
-    """Velocity and acceleration tables of every position kind (DESIGN §6.6, §13).
+    """Velocity and acceleration tables of every position kind.
 
     Parameters
     ----------

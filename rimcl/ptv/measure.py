@@ -1,5 +1,4 @@
-"""The synthetic PTV measurement of one case: tracers → rays → images → centroids → tracks
-(DESIGN §6).
+"""The synthetic PTV measurement of one case: tracers → rays → images → centroids → tracks.
 
 :func:`run_render` runs the stages in order: the configuration resolved against the field
 (:mod:`rimcl.ptv.run_setup`); the true tracks and the reference images through a uniform

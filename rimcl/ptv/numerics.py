@@ -6,7 +6,7 @@ own scene, for one case, with the positions of the first frame: the step halved,
 grid coarsened to every second node (the field and its gradient sampled from the full
 grid, so only the interpolation between nodes changes). If the PDFs collapse, neither the
 step nor the grid decides the result; if the coarse grid moves them, the field's resolution
-does (DESIGN §4.2–4.3).
+does.
 """
 
 import dataclasses

@@ -250,7 +250,7 @@ def _calibrate_interp(setup, case_index, positions):
     """Choose the interpolation for ``interp="auto"`` once, on the first measured frame.
 
     The tolerance is 0.01 pixel of this camera. Every batch, frame and the reference then
-    use the same choice, so the reference stays comparable (DESIGN §4.3).
+    use the same choice, so the reference stays comparable.
     """
     from rimcl.optics.auto_choice import calibrate
 

@@ -2,7 +2,7 @@
 
 A study images ``F`` frames ``Δt`` apart; every ``m``-th of them is a measurement with
 frames ``m Δt`` apart. The velocity and acceleration tables (the paper's differences and
-the sliding fit, DESIGN §6.6) are rebuilt from the positions of those frames alone, so a
+the sliding fit) are rebuilt from the positions of those frames alone, so a
 sweep costs no tracing: each multiple gives a ``stats.json`` document, and the figure of
 :func:`rimcl.stats.figures_dt_sweep.write_dt_sweep_figure` shows at which Δt refraction rises
 above the baseline (finite differences, rendering and rounding).

@@ -1,6 +1,6 @@
 """True tracer motion in the sheet, and measured velocities and accelerations of tracks.
 
-Tracers move with the in-plane flow velocity ``(u2, u3)`` of the sheet (DESIGN §6.5):
+Tracers move with the in-plane flow velocity ``(u2, u3)`` of the sheet:
 ``dx/dt = u(x, t)``, integrated by classical RK4 in time, with ``u`` interpolated by cubic
 splines in space and linearly in time between the frames. In space: the periodic cubic
 B-spline for a periodic box; otherwise FITPACK's interpolating bicubic spline, which
@@ -13,7 +13,7 @@ field. The true velocity and acceleration along a track are those of this model:
 
 Measured motion from positions at ``F`` frames ``Δt`` apart, in two ways:
 
-- the paper's finite differences (DESIGN §6.6), for every frame where they exist:
+- the paper's finite differences, for every frame where they exist:
   ``u_k = (x_{k+1} - x_k) / Δt`` at frames ``k = 0 … F-2`` (:func:`forward_differences`) and
   ``a_k = (x_{k+1} - 2 x_k + x_{k-1}) / Δt²`` at frames ``k = 1 … F-2``
   (:func:`second_differences`);

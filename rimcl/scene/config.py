@@ -29,7 +29,7 @@ DEFAULT_PSF_SIGMA = 7.0  # the study's PSF (px) when neither the scene nor a len
 
 @dataclasses.dataclass(frozen=True)
 class CameraConfig:
-    """Which rays leave a tracer and reach the camera (DESIGN §6.2).
+    """Which rays leave a tracer and reach the camera.
 
     Attributes
     ----------
@@ -148,7 +148,7 @@ class CameraConfig:
 
 @dataclasses.dataclass(frozen=True)
 class RendererConfig:
-    """How a tracer image is made and located (DESIGN §6.3–6.4).
+    """How a tracer image is made and located.
 
     Attributes
     ----------

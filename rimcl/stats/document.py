@@ -1,4 +1,4 @@
-"""Error statistics of synthetic PTV measurements (DESIGN §6.6, §7, §13).
+"""Error statistics of synthetic PTV measurements.
 
 Input: the HDF5 tables written by ``rimcl render`` (one file per refractive-index case).
 Output: one ``stats.json`` document, whose shape is documented in the README:

@@ -1,4 +1,4 @@
-"""Figures of a study (DESIGN §7): the paper's set, readable, with their numbers beside them.
+"""Figures of a study: the paper's set, readable, with their numbers beside them.
 
 Each figure is written as ``<name>.png`` and ``<name>.pdf`` (with the versions in the file
 metadata) and ``<name>.json``: every number drawn, by panel and series, with the

@@ -48,7 +48,7 @@ ACCELERATION_COLUMNS = (
     "a3_meas",
     "flags",
 )
-#: Columns of the optics part of the error budget (DESIGN §13), all or none of a group:
+#: Columns of the optics part of the error budget, all or none of a group:
 #: ``<q>_opt`` through the field, ``<q>_opt_ref`` through a uniform medium.
 OPTICS_COLUMNS = {
     "x": ("x2_opt", "x3_opt", "x2_opt_ref", "x3_opt_ref"),

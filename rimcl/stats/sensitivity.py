@@ -2,7 +2,7 @@
 
 A bootstrap interval says how the number moves with the tracers; it says nothing about the
 threshold, the interpolation or the number of rays, which a user chooses and which move
-some numbers more (DESIGN §18: at C4 the threshold moves u3 by a factor 2.5). Each headline
+some numbers more (at C4 the threshold moves u3 by a factor 2.5). Each headline
 number gets the same number under each variant and a verdict: *stable* where every variant
 lies inside the bootstrap 95 % interval, else *depends on X by Y %* (the variant that moves
 it most, relative to the number).

@@ -1,5 +1,5 @@
 """The top of ``summary.md``: the answer a user asked for, in their units, and the warnings
-an experimentalist would give about the scene (DESIGN §18).
+an experimentalist would give about the scene.
 
 :func:`answer_lines` says, per case, the velocity (and acceleration) error at the scene's
 Δt in mm/s and px/frame, as a share of the rms velocity, and how much of it refraction

@@ -1,4 +1,4 @@
-"""Studies over many processes, GPUs and machines with Dask distributed (DESIGN §17).
+"""Studies over many processes, GPUs and machines with Dask distributed.
 
 :func:`measure_cases` measures the cases of a study (:func:`rimcl.study.run.run_study` with a
 ``scheduler``) as Dask tasks, one per (case, shard of tracers). Tracers are independent

@@ -486,7 +486,7 @@ def run_study(
 
 
 def physical_equivalents(delta_n_max, fluid):
-    """What a case's index difference means physically (DESIGN §16): the temperature
+    """What a case's index difference means physically: the temperature
     difference of air and of water (and the salinity difference of salt water) that gives
     it, at the scene's fluid state (``fluid``, a :class:`rimcl.scene.config.FluidConfig`;
     default 20 °C, 532 nm).

@@ -313,7 +313,7 @@ def _sensitivity_lines(cases, study):
 
 
 def _physical_lines(cases):
-    """What each case's Δn_max means in air, water and salt water (DESIGN §16)."""
+    """What each case's Δn_max means in air, water and salt water."""
     if not all("physical_equivalent" in case for case in cases):
         return []
     lines = [
