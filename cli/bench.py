@@ -133,7 +133,8 @@ def bench(out_dir, tune, quick, field_path, cases, interps, precisions, pixels, 
 def _tune(device_spec):
     """Measure the kernel shapes of the device and print what was measured."""
     from rimcl.core.device import select_device
-    from rimcl.optics.shapes import cache_path, describe_shape, tune
+    from rimcl.optics.shapes import cache_path, describe_shape
+    from rimcl.optics.tuning import tune
 
     device = select_device(device_spec)
     click.echo(f"measuring kernel shapes on {device.name.strip()} (trilinear f32c) ...")

@@ -202,8 +202,8 @@ def render(
                    --view-angle 10 -o pupil.h5
       rimcl render --tracers 50 --frame-image frame.png -o look.h5
     """
+    from rimcl.core.atomic import check_output
     from rimcl.core.device import describe_device
-    from rimcl.core.provenance import check_output
     from rimcl.ptv.measure import run_render
     from rimcl.ptv.render_file import check_frame_image, write_frame_image, write_render
     from rimcl.scene.command import command_case

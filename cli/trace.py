@@ -124,9 +124,9 @@ def trace(
       rimcl trace scene.toml --case C4 --precision f64 -o water.h5
       rimcl trace --analytic grin --length 100 --fan 8 -o grin.h5
     """
+    from rimcl.core.atomic import check_output
     from rimcl.core.device import describe_device, select_device
     from rimcl.core.memory import check_field_upload, check_trace_memory
-    from rimcl.core.provenance import check_output
     from rimcl.fields.field import Field, analytic_field
     from rimcl.fields.field_loading import load_field
     from rimcl.optics.rays import fan_rays, read_rays, scene_for, write_trace

@@ -10,7 +10,7 @@ from tracing_fields import oblique_rays, smooth_field
 
 import rimcl
 from rimcl.core.errors import RimclError
-from rimcl.optics import shapes
+from rimcl.optics import shapes, tuning
 from rimcl.optics.shapes import KernelShape
 
 
@@ -34,7 +34,7 @@ def test_trace_rays_uses_the_cached_shape_and_traces_the_same_bits(device, cache
     """A cached shape (an unusual one: 4 lanes, work-groups of 2) is what trace_rays and
     `rimcl devices` use; the results are those of the rule-based shape, bit for bit."""
     rule = _trace(device, kernel_shape=shapes.rule_shape(device))
-    assert shapes.tuned_entry(device) is None  # nothing cached: the rule
+    assert tuning.tuned_entry(device) is None  # nothing cached: the rule
     assert shapes.default_kernel_shape(device) == shapes.rule_shape(device)
     wanted = KernelShape(lanes=4, pocl_fast=False, group=2)
     shapes._write_cache(cache, shapes.device_key(device), {"shape": wanted.describe()})
@@ -71,7 +71,7 @@ def test_a_tiny_tuning_run_keeps_the_fastest_shape(device, cache):
     in the cache (atomically written JSON), and the device then uses it."""
     rule = shapes.rule_shape(device)
     other = KernelShape(lanes=1 if rule.lanes > 1 else 8, pocl_fast=rule.pocl_fast)
-    entry = shapes.tune(device, nodes=10, rays=256, repeats=2, shapes=[rule, other], groups=[4])
+    entry = tuning.tune(device, nodes=10, rays=256, repeats=2, shapes=[rule, other], groups=[4])
     measured = {
         KernelShape(m["lanes"], m["pocl_fast"], m["group"]): m for m in entry["measurements"]
     }

@@ -1,4 +1,5 @@
-"""Checks that rimcl's stage subpackages import only downward, and that no module is too long.
+"""Checks that rimcl's stage subpackages import only downward, that no two modules import
+each other (directly or around a loop), and that no module is too long.
 
 The stages, lowest first, are listed in :data:`STAGES`; a module may import from its own
 stage or a lower one, never a higher one (function-level imports included). Run from the
@@ -33,6 +34,40 @@ def imported_modules(path):
             yield node.module
 
 
+def import_cycles(root):
+    """Loops of rimcl modules that import each other (function-level imports included)."""
+    package = root / "rimcl"
+    graph = {}
+    for path in sorted(package.rglob("*.py")):
+        parts = path.relative_to(root).with_suffix("").parts
+        module = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+        graph[module] = set()
+        tree = ast.parse(path.read_text(), filename=str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                graph[module] |= {node.module, *(f"{node.module}.{a.name}" for a in node.names)}
+            elif isinstance(node, ast.Import):
+                graph[module] |= {alias.name for alias in node.names}
+    graph = {m: sorted(t for t in targets if t in graph and t != m) for m, targets in graph.items()}
+    state, loops = {}, []
+
+    def visit(module, stack):
+        state[module] = "open"
+        stack.append(module)
+        for target in graph[module]:
+            if state.get(target) == "open":
+                loops.append([*stack[stack.index(target) :], target])
+            elif target not in state:
+                visit(target, stack)
+        stack.pop()
+        state[module] = "done"
+
+    for module in graph:
+        if module not in state:
+            visit(module, [])
+    return loops
+
+
 def offences(root):
     """Lines describing each upward import and each over-long module under ``root/rimcl``."""
     package = root / "rimcl"
@@ -54,7 +89,9 @@ def offences(root):
 
 
 def main():
-    found = list(offences(Path(__file__).resolve().parents[1]))
+    root = Path(__file__).resolve().parents[1]
+    found = list(offences(root))
+    found += ["import cycle: " + " -> ".join(loop) for loop in import_cycles(root)]
     for line in found:
         print(line)
     return 1 if found else 0

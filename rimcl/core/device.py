@@ -193,7 +193,7 @@ def build_problem(device):
         pass
     keep, problem = _probe_in_child(device, builds)
     if keep is not None:
-        from rimcl.core.provenance import atomic_path
+        from rimcl.core.atomic import atomic_path
 
         try:
             path.parent.mkdir(parents=True, exist_ok=True)

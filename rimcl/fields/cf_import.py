@@ -32,9 +32,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from rimcl.core.atomic import check_output
 from rimcl.core.errors import RimclError, first_line
 from rimcl.core.memory import check_import_memory
-from rimcl.core.provenance import check_output
 from rimcl.fields.derivatives import gradient as compute_gradient
 from rimcl.fields.field_writer import write_field
 from rimcl.fields.jhtdb import (

@@ -9,8 +9,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path, stamp_h5
+from rimcl.core.provenance import stamp_h5
 from rimcl.fields.field import BOUNDARIES
 from rimcl.fields.field_layout import SCHEMA, SCHEMA_VERSION, SHEET_VELOCITY, check_sheet_x1
 

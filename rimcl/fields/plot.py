@@ -3,8 +3,9 @@
 import numpy as np
 
 from rimcl import __version__
+from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path, to_json
+from rimcl.core.provenance import to_json
 from rimcl.fields.field_reader import FieldFile
 
 QUANTITIES = ("all", "density", "gradient", "velocity")

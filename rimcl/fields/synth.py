@@ -33,9 +33,9 @@ import math
 import numpy as np
 import scipy.fft
 
+from rimcl.core.atomic import check_output
 from rimcl.core.errors import RimclError
 from rimcl.core.memory import check_synth_memory
-from rimcl.core.provenance import check_output
 from rimcl.fields.field_writer import write_field
 
 RHO_LIGHT = 1.0

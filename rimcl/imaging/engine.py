@@ -39,7 +39,7 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.imaging.device import DeviceImager, profiling_queue, require_fp64
 from rimcl.optics.camera import LensCamera, PlaneCamera, PupilCamera
-from rimcl.optics.shapes import default_kernel_shape, tuned_entry
+from rimcl.optics.shapes import default_kernel_shape
 from rimcl.optics.straight import straight_rays
 from rimcl.optics.trace import (
     _RAY_OUT_STRIDE,
@@ -48,6 +48,7 @@ from rimcl.optics.trace import (
     plan_steps,
     prepare_launch,
 )
+from rimcl.optics.tuning import tuned_entry
 
 _CAM_COUNT = 25  # camera block of cl/fan.cl (CAM_* there)
 #: Work-group size of the fan kernel: fixed, so that PoCL compiles its work-group function
@@ -306,8 +307,9 @@ class FanStage:
         work-groups of :data:`FAN_GROUP` unless a size was measured."""
         import pyopencl as cl
 
+        measured = tuned_entry(self.device)  # measured on first use of the device
         shape = default_kernel_shape(self.device)
-        if tuned_entry(self.device) is None and self.device.type & cl.device_type.CPU:
+        if measured is None and self.device.type & cl.device_type.CPU:
             shape = dataclasses.replace(shape, lanes=FAN_CPU_LANES)
         if shape.group is None:
             shape = dataclasses.replace(shape, group=FAN_GROUP)

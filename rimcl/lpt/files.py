@@ -33,7 +33,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rimcl.core.provenance import atomic_path, stamp_h5, to_json
+from rimcl.core.atomic import atomic_path
+from rimcl.core.provenance import stamp_h5, to_json
 from rimcl.stats.tables import write_json
 
 SCHEMA = "lpt_case"

@@ -33,8 +33,9 @@ from pathlib import Path
 import numpy as np
 
 from rimcl import __version__
+from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path, to_json, versions
+from rimcl.core.provenance import to_json, versions
 from rimcl.fields.field import Field
 from rimcl.optics.trace import (
     INTERPOLATIONS,

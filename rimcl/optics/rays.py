@@ -11,9 +11,10 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError, first_line
 from rimcl.core.memory import check_array_memory
-from rimcl.core.provenance import atomic_path, stamp_h5, to_json
+from rimcl.core.provenance import stamp_h5, to_json
 from rimcl.fields.field import AnalyticField
 from rimcl.optics.camera import PlaneCamera, Scene, seed_tracers
 from rimcl.optics.trace import STATUS_NAMES

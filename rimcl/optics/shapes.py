@@ -7,11 +7,12 @@ in the same order; tests compare them bit for bit), so the choice is one of spee
 and which is fastest depends on the machine: the vector width and gathers of the CPU, the
 driver's compiler, a GPU's warps.
 
-So on first use of a device :func:`default_kernel_shape` times the shapes that matter
-(:func:`tune`: trilinear ``f32c``, the default trace, on a small seeded field) and keeps
-the fastest, with its measurements, in the user's cache directory, one entry per device
-name, driver version and CPU model. ``rimcl bench --tune`` measures again;
-``rimcl devices`` shows the shape in use. Environment:
+So on first use of a device :func:`rimcl.trace_rays` and the device engine time the shapes
+that matter (:func:`rimcl.optics.tuning.tune`: trilinear ``f32c``, the default trace, on a
+small seeded field) and keep the fastest, with its measurements, in the user's cache
+directory, one entry per device name, driver version and CPU model; this module reads and
+writes that cache (it imports nothing of the tracer, which uses it). ``rimcl bench --tune``
+measures again; ``rimcl devices`` shows the shape in use. Environment:
 
 - ``RIMCL_TUNE``: ``auto`` (default: tune once per device, then use the cache),
   ``cache`` (use the cache, never tune: the rule-based shape where there is no entry),
@@ -21,16 +22,11 @@ name, driver version and CPU model. ``rimcl bench --tune`` measures again;
 """
 
 import dataclasses
-import datetime
 import json
 import logging
-import math
 import os
 import platform
-import time
 from pathlib import Path
-
-import numpy as np
 
 from rimcl.core.errors import RimclError
 
@@ -103,8 +99,8 @@ def _tuned_class(precision, interp):
 
 
 def default_kernel_shape(device, precision="f32c", interp="trilinear"):
-    """The kernel shape for ``device``: the measured one (tuned on first use, see the
-    module), else :func:`rule_shape`.
+    """The kernel shape for ``device``: the measured one in the cache (measured on first use
+    by :func:`rimcl.optics.tuning.tuned_entry`), else :func:`rule_shape`.
 
     Parameters
     ----------
@@ -118,7 +114,7 @@ def default_kernel_shape(device, precision="f32c", interp="trilinear"):
     -------
     KernelShape
     """
-    entry = tuned_entry(device)
+    entry = cached_entry(device)
     if entry is None:
         return rule_shape(device, precision, interp)
     shape = KernelShape(**entry["shape"])
@@ -179,7 +175,8 @@ def _read_cache(path):
 
 def _write_cache(path, key, entry):
     """Add ``entry`` under ``key``, keeping the other devices' entries; atomic."""
-    from rimcl.core.provenance import atomic_path, to_json
+    from rimcl.core.atomic import atomic_path
+    from rimcl.core.provenance import to_json
 
     path.parent.mkdir(parents=True, exist_ok=True)
     entries = _read_cache(path)
@@ -191,8 +188,9 @@ def _write_cache(path, key, entry):
 _memo = {}
 
 
-def tuned_entry(device):
-    """The cache entry of ``device`` (tuning it first in mode ``auto``), or None.
+def cached_entry(device):
+    """The cache entry of ``device``, or None (never tunes: on first use
+    :func:`rimcl.optics.tuning.tuned_entry` measures it).
 
     Returns
     -------
@@ -209,10 +207,8 @@ def tuned_entry(device):
     if entry is not None and not _valid_entry(entry):
         logger.warning("ignoring a malformed kernel-shape entry for %s in %s", key, path)
         entry = None
-    if entry is None and mode == "auto":
-        logger.info("measuring the kernel shapes of %s once (cached in %s)", key, path)
-        entry = tune(device, path=path)
-    _memo[(path, key)] = entry
+    if entry is not None:
+        _memo[(path, key)] = entry
     return entry
 
 
@@ -259,162 +255,3 @@ def _valid_entry(entry):
     except (KeyError, TypeError, RimclError):
         return False
     return True
-
-
-def candidate_shapes(device):
-    """The shapes :func:`tune` times first (work-group sizes come after, for the best).
-
-    CPUs: 1, 8 and 16 lanes, with and without the PoCL switch on PoCL; GPUs: one ray
-    per work-item.
-    """
-    import pyopencl as cl
-
-    from rimcl.core.device import is_pocl
-
-    if not device.type & cl.device_type.CPU:
-        return [KernelShape(1, False)]
-    switches = (False, True) if is_pocl(device) else (False,)
-    return [
-        KernelShape(lanes, fast) for lanes in (1, CPU_LANES, POCL_FLOAT_LANES) for fast in switches
-    ]
-
-
-def _tuning_field(nodes):
-    """A seeded smooth random field of ``nodes³`` (Δn as air, clamped), like speed.py's."""
-    from rimcl.fields.field import Field
-    from rimcl.optics.bench import synthetic_density
-
-    density = synthetic_density(nodes, seed=3)
-    k_rho = 2.82e-4
-    return Field.from_arrays(
-        k_rho * (density - density.mean()),
-        spacing=(1 / (nodes - 1),) * 3,
-        n_ref=1.0 + k_rho * density.mean(),
-        boundary="clamp",
-    )
-
-
-def tune(
-    device, *, path=None, nodes=32, rays=16384, repeats=3, shapes=None, groups=None, write=True
-):
-    """Time the kernel shapes on ``device`` and keep the fastest (see the module).
-
-    Each candidate traces the same rays through a small field (trilinear ``f32c``, fixed
-    step), warm, in interleaved rounds; its time is the best of ``repeats`` kernel runs.
-    A shape whose results differ in any bit from the first one's is left out (a driver
-    bug; it is logged). Then the work-group sizes are timed for the fastest shape.
-
-    Parameters
-    ----------
-    device : pyopencl.Device
-    path : Path, optional
-        Cache file; default :func:`cache_path`.
-    nodes : int
-        Grid nodes per axis of the field (about ``2 nodes`` steps per ray).
-    rays : int
-    repeats : int
-    shapes : list of KernelShape, optional
-        Default :func:`candidate_shapes`.
-    groups : sequence of int, optional
-        Work-group sizes tried with the fastest shape; default :data:`CPU_GROUPS` or
-        :data:`GPU_GROUPS` (each is another kernel build on PoCL).
-    write : bool
-        Store the result in the cache.
-
-    Returns
-    -------
-    dict
-        ``shape``, ``measurements`` (per shape: ray-steps/s, seconds of each run),
-        ``device``, ``cpu``, ``workload``, ``measured`` (UTC time) and ``seconds``.
-    """
-    import pyopencl as cl
-
-    from rimcl.core.device import describe_device
-    from rimcl.optics.rays import fan_rays, scene_for
-    from rimcl.optics.trace import _validate_rays, plan_steps, run_trace
-
-    started = time.perf_counter()
-    field = _tuning_field(int(nodes))
-    scene = scene_for(field)
-    fan = max(1, round(math.sqrt(rays / 16)))
-    origins, directions, _ = fan_rays(scene, 16, fan, seed=0)
-    origins, directions = _validate_rays(origins, directions)
-    plan = plan_steps(field, None, scene.x_end, origins)
-
-    def trace(shape):
-        return run_trace(
-            field,
-            origins,
-            directions,
-            x_end=scene.x_end,
-            plan=plan,
-            interp="trilinear",
-            precision="f32c",
-            device=device,
-            kernel_shape=shape,
-        )
-
-    def time_shapes(shapes, first):
-        seconds = {shape: [] for shape in shapes}
-        steps = None
-        for shape in shapes:  # build and warm up; check the bits
-            result = trace(shape)
-            same = all(
-                np.array_equal(getattr(result, name), getattr(first, name), equal_nan=True)
-                for name in ("end_pos", "end_dir", "path_length", "n_metric", "status")
-            )
-            if not same:
-                logger.warning("kernel shape %s traces other bits on %s: left out", shape, key)
-                del seconds[shape]
-            steps = int(result.config["sharma_steps"])
-        for _ in range(repeats):
-            for shape in seconds:
-                seconds[shape].append(trace(shape).config["kernel_seconds"])
-        return seconds, steps
-
-    key = device_key(device)
-    candidates = candidate_shapes(device) if shapes is None else list(shapes)
-    first = trace(candidates[0])
-    seconds, steps = time_shapes(candidates, first)
-    best = min(seconds, key=lambda shape: min(seconds[shape]))
-    if groups is None:
-        groups = CPU_GROUPS if device.type & cl.device_type.CPU else GPU_GROUPS
-    largest = int(device.max_work_group_size)
-    more = [
-        dataclasses.replace(best, group=group)
-        for group in groups
-        if group is not None and group <= largest
-    ]
-    if more:  # the best shape again beside its work-group sizes, under the same load
-        for shape, runs in time_shapes([best, *more], first)[0].items():
-            seconds.setdefault(shape, []).extend(runs)
-    best = min(seconds, key=lambda shape: min(seconds[shape]))
-    measurements = [
-        {
-            **shape.describe(),
-            "ray_steps_per_s": steps / min(runs),
-            "kernel_seconds": runs,
-        }
-        for shape, runs in seconds.items()
-    ]
-    entry = {
-        "shape": best.describe(),
-        "measurements": measurements,
-        "device": describe_device(device),
-        "cpu": cpu_model(),
-        "workload": {
-            "field_nodes": int(nodes),
-            "rays": len(origins),
-            "sharma_steps": steps,
-            "interp": "trilinear",
-            "precision": "f32c",
-            "repeats": int(repeats),
-        },
-        "measured": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "seconds": time.perf_counter() - started,
-    }
-    if write:
-        path = cache_path() if path is None else Path(path)
-        _write_cache(path, key, entry)
-        _memo[(path, key)] = entry
-    return entry

@@ -16,6 +16,7 @@ from rimcl.optics.trace import (
     plan_steps,
     run_trace,
 )
+from rimcl.optics.tuning import tuned_entry
 
 
 def trace_rays(
@@ -99,6 +100,8 @@ def trace_rays(
     origins, directions = _validate_rays(origins, directions)
     x_end = float(x_end)
     device = select_device(device)
+    if kernel_shape is None:
+        tuned_entry(device)  # the device's kernel shapes, measured once on first use
     calibration = None
     if interp == "auto" or step == "auto":
         calibration = calibrate(

@@ -60,8 +60,9 @@ from scipy.ndimage import (
     uniform_filter,
 )
 
+from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path, stamp_h5, to_json, versions
+from rimcl.core.provenance import stamp_h5, to_json, versions
 from rimcl.piv.validity import (
     noise_sigma,
     normalized_median_test,
@@ -677,8 +678,8 @@ def analyze_files(path_a, path_b, output, settings=None, overwrite=False):
     -------
     PivResult
     """
+    from rimcl.core.atomic import check_output
     from rimcl.core.memory import check_host
-    from rimcl.core.provenance import check_output
 
     check_output(output, overwrite)
     settings = PivSettings() if settings is None else settings

@@ -27,8 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
+from rimcl.core.atomic import atomic_path, check_output
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path, check_output, to_json, versions
+from rimcl.core.provenance import to_json, versions
 from rimcl.piv.analysis import WindowGrid
 
 FORMATS = {".nc": "netCDF-4 (xarray)", ".txt": "OpenPIV text", ".mat": "PIVlab .mat"}

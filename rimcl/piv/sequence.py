@@ -31,8 +31,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from rimcl.core.atomic import atomic_path, check_output
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path, check_output, stamp_h5
+from rimcl.core.provenance import stamp_h5
 from rimcl.fields.crop import CroppedSource
 from rimcl.imaging.sensor import MEASURED_PASS
 from rimcl.piv.analysis import write_tiff

@@ -30,8 +30,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path, stamp_h5, to_json
+from rimcl.core.provenance import stamp_h5, to_json
 from rimcl.core.tables_h5 import label_grid
 from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair, check_piv_memory
 from rimcl.piv.imaging_config import IMAGE_AXES, PivImaging, frame_pixels

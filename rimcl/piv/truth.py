@@ -19,7 +19,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rimcl.core.provenance import atomic_paths, check_output, stamp_h5
+from rimcl.core.atomic import atomic_paths, check_output
+from rimcl.core.provenance import stamp_h5
 from rimcl.piv.analysis import write_tiff
 from rimcl.piv.imaging_config import frame_pixels, sheet_intensity
 
@@ -163,7 +164,7 @@ def check_outputs(prefix, overwrite=False):
 def write_piv_render(prefix, result, overwrite=True):
     """Write the four TIFF frames and the ground-truth HDF5 file of a :class:`PivRender`,
     as one set: all five are renamed into place once all are written, so a failure leaves
-    the files of an earlier run whole (:func:`rimcl.core.provenance.atomic_paths`).
+    the files of an earlier run whole (:func:`rimcl.core.atomic.atomic_paths`).
 
     Parameters
     ----------

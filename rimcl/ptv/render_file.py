@@ -13,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+from rimcl.core.atomic import atomic_path, check_output
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path, check_output, stamp_h5, to_json
+from rimcl.core.provenance import stamp_h5, to_json
 from rimcl.core.tables_h5 import label_table
 
 SCHEMA = "render"

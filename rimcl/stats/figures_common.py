@@ -16,7 +16,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
 
 from rimcl import __version__
-from rimcl.core.provenance import atomic_path, to_json
+from rimcl.core.atomic import atomic_path
+from rimcl.core.provenance import to_json
 from rimcl.stats.tables import kept_rows, write_json
 
 #: Bins per decade of the logarithmic parts of the relative-error histograms.

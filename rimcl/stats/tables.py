@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rimcl.core.provenance import atomic_path, to_json
+from rimcl.core.atomic import atomic_path
+from rimcl.core.provenance import to_json
 
 #: Points of the grid on which kernel density estimates are evaluated to find a peak.
 PEAK_GRID_POINTS = 1024

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from rimcl.core.provenance import atomic_path
+from rimcl.core.atomic import atomic_path
 from rimcl.stats.error_blocks import kinematic_blocks, vector_columns
 from rimcl.stats.summaries import SUMMARY_KEYS
 from rimcl.stats.tables import flagged_tracers

@@ -45,8 +45,8 @@ import time
 import uuid
 from pathlib import Path
 
+from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import atomic_path
 from rimcl.core.tables_h5 import ROW_DIMENSION
 from rimcl.study.scheduler import _import_distributed, check_scheduler, parse_scheduler
 

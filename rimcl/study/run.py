@@ -43,8 +43,9 @@ import time
 from pathlib import Path
 
 from rimcl import __version__
+from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import STUDY_MARKER, atomic_path
+from rimcl.core.provenance import STUDY_MARKER
 from rimcl.scene.config import DEFAULT_PSF_SIGMA
 from rimcl.scene.load import load_scene
 from rimcl.scene.study_config import StudyConfig
@@ -62,7 +63,7 @@ MARKER = STUDY_MARKER
 #: Name of the one case of a field file that stores δn (its own refractive index).
 DELTA_N_CASE = "delta_n"
 #: Frames every study case images (positions, velocity, acceleration).
-# a partial file of rimcl.core.provenance.atomic_path: "." + name + "." + 8 random chars + ".part"
+# a partial file of rimcl.core.atomic.atomic_path: "." + name + "." + 8 random chars + ".part"
 _PART_FILE = re.compile(r"^\..+\.[A-Za-z0-9_]{8}\.part$")
 
 
