@@ -86,6 +86,13 @@ DEFINE_SETS = {
             ),
         ],
     ),
+    "frame.cl": (
+        (
+            "tracer_rows",
+            "splat_tiles",
+        ),
+        [*_product(RIMCL_MIE=(0, 1), RIMCL_TILE=(16, 32, 64), RIMCL_POCL_FAST=(0, 1))],
+    ),
 }
 
 

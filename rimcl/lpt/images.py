@@ -119,7 +119,8 @@ def rig_exposure(cameras, reference_views, mie, sensor, exposure, threshold):
     exposure : float
         Peak of the brightest camera's median tracer, as a fraction of the sensor's level.
     threshold : float
-        Each camera's threshold as a fraction of its median tracer's peak.
+        Each camera's threshold above the sensor's mean background, as a fraction of its
+        median tracer's peak.
 
     Returns
     -------
@@ -134,8 +135,12 @@ def rig_exposure(cameras, reference_views, mie, sensor, exposure, threshold):
     level = sensor.peak_electrons if sensor.noise else sensor.full_scale
     scale = exposure * level / brightest
     counts_per_light = scale / sensor.gain if sensor.noise else scale
+    # above the background, as a PTV code thresholds: a dim camera's fraction of its median
+    # peak can lie below the background's level, and then every window is one blob
+    background = sensor.background_e / sensor.gain if sensor.noise else 0.0
     thresholds = tuple(
-        float(threshold * m * p * counts_per_light) for m, p in zip(medians, peaks, strict=True)
+        float(background + threshold * m * p * counts_per_light)
+        for m, p in zip(medians, peaks, strict=True)
     )
     return Exposure(float(scale), float(counts_per_light), thresholds, tuple(medians), tuple(peaks))
 

@@ -577,7 +577,8 @@ def case_statistics(run, result, scene):
                     bootstrap,
                     condition=False,
                 ),
-                "truth_rms": float(np.sqrt(np.mean(truth[..., axis] ** 2))),
+                # n/a where no tracer was kept (every image lost): nothing was measured
+                "truth_rms": float(np.sqrt(np.mean(truth[..., axis] ** 2))) if truth.size else None,
             }
         stats[label] = block
     stats["fit"] = {"window": window, "order": order, "dt": dt}
