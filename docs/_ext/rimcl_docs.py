@@ -137,7 +137,21 @@ def escape_bars(app, what, name, obj, options, lines):
             lines[i] = "".join(parts)
 
 
+def skip_foreign_members(app, what, name, obj, skip, options):
+    """Leave out a module's members that another package defines.
+
+    Sphinx 9's autodoc takes some compiled classes imported into a module (scipy's
+    ``cKDTree`` in :mod:`rimcl.lpt.matching`) for the module's own members and then fails
+    on their signatures; rimcl's pages document rimcl's objects only.
+    """
+    module = getattr(obj, "__module__", None)
+    if what == "module" and isinstance(module, str) and module.split(".")[0] != "rimcl":
+        return True
+    return None
+
+
 def setup(app):
+    app.connect("autodoc-skip-member", skip_foreign_members)
     app.connect("builder-inited", write_generated)
     app.connect("autodoc-process-docstring", escape_bars, priority=400)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
