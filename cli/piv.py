@@ -226,7 +226,11 @@ RENDER_SCENE_KEYS = {
     type=COUNT,
     help="Rays per tracer (a plane camera: a fan of round(√rays) per side) [piv.rays].",
 )
-@click.option("--fan", type=COUNT, help="Plane camera: M×M rays per tracer (--rays M²).")
+@click.option(
+    "--fan",
+    type=COUNT,
+    help="Plane camera: M×M rays per tracer (--rays M²); alone: the plane camera.",
+)
 @click.option("--pupil-rays", type=COUNT, help="Pupil or lens camera: rays per tracer (--rays).")
 @click.option(
     "--aperture-diameter", type=POSITIVE, help="Pupil diameter [camera.aperture_diameter]."
@@ -341,6 +345,9 @@ def render(
         raise click.UsageError(f"{' and '.join(given)} both set the rays per tracer: give one")
     if fan is not None or pupil_rays is not None:
         options["rays"] = fan**2 if fan is not None else pupil_rays
+    if options["camera"] is None and (fan is not None or pupil_rays is not None):
+        # --fan alone asks for the plane camera (--pupil-rays for the pupil), as in rimcl study
+        options["camera"] = "plane" if fan is not None else "pupil"
     overrides = {RENDER_SCENE_KEYS[name]: value for name, value in options.items()}
     parsed_step = parse_step(step)
     if isinstance(parsed_step, float):
