@@ -315,6 +315,34 @@ class FanStage:
             shape = dataclasses.replace(shape, group=FAN_GROUP)
         return shape
 
+    def enqueue(
+        self, queue, kernel, launch, tracers, rays, n_rays, ray_buffers, sample_args, mie_args
+    ):
+        """Set ``trace_fan``'s arguments (``cl/fan.cl``) and enqueue it over ``n_rays`` rays
+        (``rays`` per tracer) in work-groups of the launch's shape; returns its event."""
+        import pyopencl as cl
+
+        kernel.set_args(
+            launch.field_buffer,
+            launch.counts,
+            launch.params,
+            tracers,
+            self.aims,
+            self.order,
+            self.camera_block,
+            np.int32(rays),
+            np.int32(n_rays),
+            np.int32(launch.max_steps),
+            *ray_buffers,
+            *sample_args,
+            *mie_args,
+            *self.straight_args,
+        )
+        items = -(-n_rays // launch.shape.lanes)  # work-items: rays in lanes, rounded up
+        group = launch.shape.group
+        items = -(-items // group) * group
+        return cl.enqueue_nd_range_kernel(queue, kernel, (items,), (group,))
+
 
 class DeviceEngine:
     """The device pipeline of one measurement (:class:`rimcl.ptv.run_setup.Setup`).
@@ -494,26 +522,17 @@ class DeviceEngine:
                 wanted, out, info = self._sample_buffers(len(sample_rays))
                 cl.enqueue_copy(self.queue, wanted, sample_rays, is_blocking=False)
                 sample_args = (wanted, np.int32(len(sample_rays)), out, info)
-        kernel.set_args(
-            launch.field_buffer,
-            launch.counts,
-            launch.params,
+        fan_event = self.fan.enqueue(
+            self.queue,
+            kernel,
+            launch,
             self.tracers,
-            self.fan.aims,
-            self.fan.order,
-            self.fan.camera_block,
-            np.int32(self.rays),
-            np.int32(n_rays),
-            np.int32(launch.max_steps),
-            *self.ray_buffers,
-            *sample_args,
-            *self.mie_args,
-            *self.fan.straight_args,
+            self.rays,
+            n_rays,
+            self.ray_buffers,
+            sample_args,
+            self.mie_args,
         )
-        items = -(-n_rays // launch.shape.lanes)
-        group = launch.shape.group
-        items = -(-items // group) * group
-        fan_event = cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), (group,))
         events = []
         if sample_rays is not None and len(sample_rays):
             host["sample_out"] = np.empty((len(sample_rays), _RAY_OUT_STRIDE), dtype=np.float32)

@@ -208,26 +208,17 @@ class DeviceFrames:
         cl.enqueue_copy(self.queue, self.tracers, positions)
         cl.enqueue_copy(self.queue, self.intensity, intensity)
         no_sample = (self.tracers, np.int32(0), self.tracers, self.tracers)
-        kernel.set_args(
-            launch.field_buffer,
-            launch.counts,
-            launch.params,
+        fan_event = self.fan.enqueue(
+            self.queue,
+            kernel,
+            launch,
             self.tracers,
-            self.fan.aims,
-            self.fan.order,
-            self.fan.camera_block,
-            np.int32(self.rays),
-            np.int32(n_rays),
-            np.int32(launch.max_steps),
-            *self.ray_buffers,
-            *no_sample,
-            *self.fan.mie_args(self.weights),
-            *self.fan.straight_args,
+            self.rays,
+            n_rays,
+            self.ray_buffers,
+            no_sample,
+            self.fan.mie_args(self.weights),
         )
-        items = -(-n_rays // launch.shape.lanes)
-        group = launch.shape.group
-        items = -(-items // group) * group
-        fan_event = cl.enqueue_nd_range_kernel(self.queue, kernel, (items,), (group,))
         ray_pixel, _, ray_code = self.ray_buffers
         self.rows_kernel.set_args(
             ray_pixel,
