@@ -11,6 +11,12 @@ def echo_case_lines(stats):
     rms(ε)/rms(truth) of u3 and a3 (fitted where the tracks allow) with 95 % intervals."""
     for case in stats["cases"]:
         g = "" if case["G"] is None else f"G = {case['G']:.3g}, "
+        if case.get("not_resolved"):
+            click.echo(
+                f"{case['name']:>8}  {g}Δn_max = {number(case['delta_n_max'])}: "
+                f"{case['n_used']}/{case['n_tracers']} tracers, errors n/a: {case['not_resolved']}"
+            )
+            continue
         parts = []
         for group, component in (
             ("velocity_fit", "u3"),

@@ -132,6 +132,30 @@ def test_uniform_medium_gives_exactly_zero_errors(tmp_path):
             assert summary["rms_normalized"] == 0.0
         assert case[block]["angle_deg_median"] == 0.0
     assert case["area_change_peak"] == 0.0
+    assert case["not_resolved"] is None  # a uniform medium really gives 0
+
+
+def test_unresolved_refraction_is_n_a_not_zero(tmp_path):
+    """An index that varies but moves no measured image (every image equals its reference)
+    was not resolved: the case says so, and the command line prints n/a, not 0."""
+    from click.testing import CliRunner
+
+    from rimcl.cli.main import cli
+
+    path = tmp_path / "locked.h5"
+    write_render_file(path, position_error_over_length=0.0)
+    case = case_statistics(load_render(path))
+    assert case["delta_n_max"] > 0 and case["position_error_peak_over_L"] == 0.0
+    assert "below what this camera and renderer resolve" in case["not_resolved"]
+    moved = tmp_path / "moved.h5"
+    write_render_file(moved)
+    assert case_statistics(load_render(moved))["not_resolved"] is None
+    result = CliRunner().invoke(
+        cli, ["stats", str(path), "-o", str(tmp_path / "s"), "--no-figures"]
+    )
+    assert result.exit_code == 0, result.output
+    line = next(line for line in result.output.splitlines() if "C1" in line and "tracers" in line)
+    assert "errors n/a" in line and "peak 0" not in line
 
 
 def test_angle_between_vectors():

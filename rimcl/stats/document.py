@@ -119,6 +119,25 @@ def budget_verdict(case):
     }
 
 
+def _not_resolved(tracers, tables):
+    """Why a case's refraction errors are no measurement, or None.
+
+    Where the index varies (Δn_max > 0) but every kept tracer's measured image point equals
+    its reference exactly, the camera and renderer did not resolve the shift (whole-pixel
+    rendering, coarse pixels): its errors are exactly 0 by construction, not measured 0.
+    """
+    if not tables.delta_n_max:
+        return None
+    moved = np.hypot(tracers["x2_meas"] - tracers["x2_ref"], tracers["x3_meas"] - tracers["x3_ref"])
+    moved = moved[np.isfinite(moved)]
+    if moved.size == 0 or np.any(moved > 0):
+        return None
+    return (
+        "no measured image moved from its reference image although the index varies: the "
+        "shift is below what this camera and renderer resolve, so its errors are n/a, not 0"
+    )
+
+
 def case_statistics(tables):
     """The ``stats.json`` entry of one case.
 
@@ -161,6 +180,7 @@ def case_statistics(tables):
     }
     refraction = refraction_errors(tables, tracers, blocks, bootstrap)
     case.update(refraction)
+    case["not_resolved"] = _not_resolved(tracers, tables)
     # the paper's definition: measured minus the truth (refraction plus the baseline)
     case["against_truth"] = {
         group: vector_errors(

@@ -219,6 +219,8 @@ def scene_warnings(stats, study):
                 f"({depth:.3g}): tracers outside the field are lit"
             )
     for case in stats["cases"]:
+        if case.get("not_resolved"):
+            warnings.append(f"{case['name']}: {case['not_resolved']}")
         warnings += _displacement_warnings(case)
     return list(dict.fromkeys(warnings))
 
