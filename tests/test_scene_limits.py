@@ -75,3 +75,24 @@ def test_ptv_options_in_piv_mode_are_named(tmp_path):
     lines = result.output.strip().splitlines()
     assert lines[0].startswith("note: --fan, --pixels set the PTV cases"), result.output
     assert result.exit_code == 1 and len(lines) == 2
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("piv.bit_depth", 3, r"piv\.bit_depth .* at least 8"),
+        ("piv.diameter", 0.1, r"piv\.diameter .* at least 1"),
+    ],
+)
+def test_piv_frames_that_no_camera_records_are_refused(key, value, message):
+    with pytest.raises(RimclError, match=message):
+        load_scene(None, {key: value})
+
+
+def test_piv_bit_depth_above_sixteen_is_refused():
+    from rimcl.piv.imaging_config import PivImaging
+
+    with pytest.raises(RimclError, match="bit depth must be 8 to 16, got 20"):
+        PivImaging(bit_depth=20)
+    with pytest.raises(RimclError, match="at least 1 pixel"):
+        PivImaging(diameter=0.5)

@@ -82,8 +82,13 @@ class PivImaging:
             raise RimclError(
                 f"the particle image density must be in (0, 1] per pixel, got {self.density}"
             )
-        if not (np.isfinite(self.diameter) and self.diameter > 0):
-            raise RimclError(f"the particle image diameter must be positive, got {self.diameter}")
+        if not (np.isfinite(self.diameter) and self.diameter >= 1):
+            raise RimclError(
+                "the particle image diameter must be at least 1 pixel (no lens images a "
+                f"particle smaller than a pixel), got {self.diameter}"
+            )
+        if int(self.bit_depth) != self.bit_depth or not 8 <= self.bit_depth <= 16:
+            raise RimclError(f"the PIV frames' bit depth must be 8 to 16, got {self.bit_depth}")
         thickness = self.sheet_thickness
         if thickness is not None and not (np.isfinite(thickness) and thickness > 0):
             raise RimclError(f"the light-sheet thickness must be positive, got {thickness}")

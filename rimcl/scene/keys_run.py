@@ -119,8 +119,9 @@ def piv_keys():
             "diameter",
             3.0,
             "float",
-            "particle image diameter d = 4 σ (pixels; a lens camera: its own tracer image)",
-            positive=True,
+            "particle image diameter d = 4 σ (pixels; a lens camera: its own tracer image); at "
+            "least 1 (no lens images a particle smaller than a pixel; below 2 px peak locking)",
+            minimum=1.0,
         ),
         SceneKey(
             "piv",
@@ -132,7 +133,9 @@ def piv_keys():
             positive=True,
             example=0.1,
         ),
-        SceneKey("piv", "bit_depth", 16, "int", "bits per pixel of the PIV frames", positive=True),
+        SceneKey(
+            "piv", "bit_depth", 16, "int", "bits per pixel of the PIV frames (8 to 16)", minimum=8
+        ),
         SceneKey(
             "piv",
             "rays",
