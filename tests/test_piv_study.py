@@ -102,7 +102,11 @@ def test_rerun_keeps_current_piv_cases_and_redoes_foreign_ones(both, device):
 
 def test_cli_piv_mode_only(device, tmp_path):
     scene_file = tmp_path / "scene.toml"
-    scene_file.write_text("[piv]\npixels = 64\nrays = 4\nwindow = 16\n[tracers]\ncount = 8\n")
+    # the plane camera: piv.pixels sets its frame (the default lens would image 2048² px)
+    scene_file.write_text(
+        '[camera]\nkind = "plane"\n'
+        "[piv]\npixels = 64\nrays = 4\nwindow = 16\n[tracers]\ncount = 8\n"
+    )
     out = tmp_path / "study"
     args = ["study", str(scene_file), "--mode", "piv", "--cases", "C1", "-o", str(out)]
     result = CliRunner().invoke(cli, [*args, "--no-figures", "--device", device.name])
