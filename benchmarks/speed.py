@@ -1,6 +1,6 @@
 """Ray-steps per second of rimcl.trace_rays, as ratios to a float64 numba baseline.
 
-the machines drift by 30-40 % from minute to minute, so only ratios measured
+The machines drift by 30-40 % from minute to minute, so only ratios measured
 in one run mean anything. This script times, on one field and one ray set, interleaved:
 
 - the numba float64 implementation of the same method (``rimcl.optics.baseline``: trilinear,
