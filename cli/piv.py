@@ -190,105 +190,180 @@ RENDER_SCENE_KEYS = {
 }
 
 
+#: The options that set PIV frames (``rimcl piv render`` and ``rimcl piv sequence``), top
+#: down: the scene file, field and case, the [piv] section, camera, sensor, integrator, run.
+_FRAME_OPTIONS = (
+    scene_options,
+    field_option,
+    case_option,
+    k_rho_option,
+    click.option("--pixels", type=COUNT, help="Pixels across the field of view [piv.pixels]."),
+    click.option(
+        "--density", type=POSITIVE, help="Particle images per pixel in the sheet [piv.density]."
+    ),
+    click.option(
+        "--diameter", type=POSITIVE, help="Particle image diameter d = 4σ, px [piv.diameter]."
+    ),
+    click.option(
+        "--sheet-thickness",
+        type=POSITIVE,
+        help="Light sheet 1/e² thickness, field length units [piv.sheet_thickness].",
+    ),
+    click.option("--bit-depth", type=click.IntRange(8, 16), help="Bits per pixel [piv.bit_depth]."),
+    click.option(
+        "--peak-fraction",
+        type=POSITIVE,
+        default=0.5,
+        show_default=True,
+        help="Peak of an isolated in-focus particle, fraction of full scale.",
+    ),
+    click.option(
+        "--camera",
+        type=click.Choice(["plane", "pupil", "lens"]),
+        help="plane: rays to the exit plane (the paper); pupil: rays over an aperture; lens: a "
+        "real lens in physical units (needs field.length_m) [camera.kind].",
+    ),
+    click.option(
+        "--rays",
+        type=COUNT,
+        help="Rays per tracer (a plane camera: a fan of round(√rays) per side) [piv.rays].",
+    ),
+    click.option(
+        "--fan",
+        type=COUNT,
+        help="Plane camera: M×M rays per tracer (--rays M²); alone: the plane camera.",
+    ),
+    click.option(
+        "--pupil-rays", type=COUNT, help="Pupil or lens camera: rays per tracer (--rays)."
+    ),
+    click.option(
+        "--aperture-diameter", type=POSITIVE, help="Pupil diameter [camera.aperture_diameter]."
+    ),
+    click.option("--focal-length", type=POSITIVE, help="With --f-number: D = F / N."),
+    click.option(
+        "--f-number", type=POSITIVE, help="With --focal-length: D = F / N [camera.f_number]."
+    ),
+    click.option("--camera-distance", type=POSITIVE, help="Sheet to pupil [camera.distance]."),
+    click.option("--view-angle", type=FINITE, help="Degrees [camera.view_angle]."),
+    click.option(
+        "--length-m", type=POSITIVE, help="Metres per field length unit [field.length_m]."
+    ),
+    click.option("--time-s", type=POSITIVE, help="Seconds per field time unit [field.time_s]."),
+    click.option(
+        "--start-frame", type=INDEX, help="Field frame of exposure A [field.start_frame]."
+    ),
+    click.option(
+        "--dt",
+        type=POSITIVE,
+        help="Time between exposures (0.1 on the sample: 1.5 px rms at 512 px) [piv.dt].",
+    ),
+    click.option("--x-sheet", type=FINITE, help="Sheet centre x1 [field.x_sheet]."),
+    click.option(
+        "--scaling",
+        type=click.Choice(["fixed", "per_image"]),
+        default="fixed",
+        show_default=True,
+        help="fixed: one scale for all frames; per_image: each frame's brightest pixel at "
+        "the peak.",
+    ),
+    click.option(
+        "--noise",
+        is_flag=True,
+        default=None,
+        help="Sensor noise: shot, read noise, background, well [sensor.noise].",
+    ),
+    click.option(
+        "--peak-electrons",
+        type=POSITIVE,
+        help="Mean e- at an in-focus particle's peak [sensor.peak_electrons].",
+    ),
+    click.option("--background-e", type=FINITE, help="Background, e-/px [sensor.background_e]."),
+    click.option(
+        "--mie",
+        is_flag=True,
+        default=None,
+        help="Weigh each ray by its Mie intensity [mie.enabled].",
+    ),
+    engine_option,
+    click.option(
+        "--interp",
+        type=click.Choice(["trilinear", "texture", "bspline3"]),
+        help="Interpolation of the gridded field [integrator.interp].",
+    ),
+    click.option(
+        "--precision",
+        type=click.Choice(["f32", "f32c", "f64"]),
+        help="Accumulation precision [integrator.precision].",
+    ),
+    step_option,
+    device_option,
+    click.option("--seed", type=INDEX, help="Random seed of the tracers [tracers.seed]."),
+)
+
+
+def piv_frame_options(command):
+    """Decorate ``command`` with :data:`_FRAME_OPTIONS` (listed top down)."""
+    for option in reversed(_FRAME_OPTIONS):
+        command = option(command)
+    return command
+
+
+def frame_configs(scene_file, scene_option, case, k_rho, peak_fraction, scaling, step, options):
+    """The scene, case and PIV configuration that :data:`_FRAME_OPTIONS` set.
+
+    Returns
+    -------
+    scene : dict
+    case : str
+    k_rho : float or None
+    piv : rimcl.piv.render.PivConfig
+    configs : dict
+        ``camera``, ``integrator``, ``fluid``, ``run``, ``sensor``, ``mie``.
+    """
+    import dataclasses
+
+    from rimcl.piv.study import configs_from_study
+    from rimcl.scene.command import command_case
+    from rimcl.scene.study_config import StudyConfig
+
+    fan, pupil_rays = options.pop("fan"), options.pop("pupil_rays")
+    given = [
+        name
+        for name, v in (("--rays", options["rays"]), ("--fan", fan), ("--pupil-rays", pupil_rays))
+        if v is not None
+    ]
+    if len(given) > 1:
+        raise click.UsageError(f"{' and '.join(given)} both set the rays per tracer: give one")
+    if fan is not None or pupil_rays is not None:
+        options["rays"] = fan**2 if fan is not None else pupil_rays
+    if options["camera"] is None and (fan is not None or pupil_rays is not None):
+        # --fan alone asks for the plane camera (--pupil-rays for the pupil), as in rimcl study
+        options["camera"] = "plane" if fan is not None else "pupil"
+    overrides = {RENDER_SCENE_KEYS[name]: value for name, value in options.items()}
+    parsed_step = parse_step(step)
+    if isinstance(parsed_step, float):
+        overrides["integrator.step"] = parsed_step
+    scene = command_scene(scene_file, scene_option, overrides)
+    case, k_rho = command_case(scene, case, k_rho)
+    piv_config, configs = configs_from_study(StudyConfig.from_scene(scene))
+    piv_config = dataclasses.replace(
+        piv_config,
+        imaging=dataclasses.replace(
+            piv_config.imaging, peak_fraction=peak_fraction, scaling=scaling
+        ),
+    )
+    if isinstance(parsed_step, str):
+        configs["integrator"] = dataclasses.replace(configs["integrator"], step=parsed_step)
+    return scene, case, k_rho, piv_config, configs
+
+
 @piv.command()
-@scene_options
-@field_option
-@case_option
-@k_rho_option
-@click.option("--pixels", type=COUNT, help="Pixels across the field of view [piv.pixels].")
-@click.option(
-    "--density", type=POSITIVE, help="Particle images per pixel in the sheet [piv.density]."
-)
-@click.option(
-    "--diameter", type=POSITIVE, help="Particle image diameter d = 4σ, px [piv.diameter]."
-)
-@click.option(
-    "--sheet-thickness",
-    type=POSITIVE,
-    help="Light sheet 1/e² thickness, field length units [piv.sheet_thickness].",
-)
-@click.option("--bit-depth", type=click.IntRange(8, 16), help="Bits per pixel [piv.bit_depth].")
-@click.option(
-    "--peak-fraction",
-    type=POSITIVE,
-    default=0.5,
-    show_default=True,
-    help="Peak of an isolated in-focus particle, fraction of full scale.",
-)
-@click.option(
-    "--camera",
-    type=click.Choice(["plane", "pupil", "lens"]),
-    help="plane: rays to the exit plane (the paper); pupil: rays over an aperture; lens: a "
-    "real lens in physical units (needs field.length_m) [camera.kind].",
-)
-@click.option(
-    "--rays",
-    type=COUNT,
-    help="Rays per tracer (a plane camera: a fan of round(√rays) per side) [piv.rays].",
-)
-@click.option(
-    "--fan",
-    type=COUNT,
-    help="Plane camera: M×M rays per tracer (--rays M²); alone: the plane camera.",
-)
-@click.option("--pupil-rays", type=COUNT, help="Pupil or lens camera: rays per tracer (--rays).")
-@click.option(
-    "--aperture-diameter", type=POSITIVE, help="Pupil diameter [camera.aperture_diameter]."
-)
-@click.option("--focal-length", type=POSITIVE, help="With --f-number: D = F / N.")
-@click.option("--f-number", type=POSITIVE, help="With --focal-length: D = F / N [camera.f_number].")
-@click.option("--camera-distance", type=POSITIVE, help="Sheet to pupil [camera.distance].")
-@click.option("--view-angle", type=FINITE, help="Degrees [camera.view_angle].")
-@click.option("--length-m", type=POSITIVE, help="Metres per field length unit [field.length_m].")
-@click.option("--time-s", type=POSITIVE, help="Seconds per field time unit [field.time_s].")
-@click.option("--start-frame", type=INDEX, help="Field frame of exposure A [field.start_frame].")
-@click.option(
-    "--dt",
-    type=POSITIVE,
-    help="Time between exposures (0.1 on the sample: 1.5 px rms at 512 px) [piv.dt].",
-)
-@click.option("--x-sheet", type=FINITE, help="Sheet centre x1 [field.x_sheet].")
+@piv_frame_options
 @click.option(
     "--window", type=COUNT, help="Interrogation window of the last pass, px [piv.window]."
 )
 @click.option("--overlap", type=NON_NEGATIVE, help="Window overlap, fraction [piv.overlap].")
 @click.option("--passes", type=COUNT, help="Correlation passes [piv.passes].")
-@click.option(
-    "--scaling",
-    type=click.Choice(["fixed", "per_image"]),
-    default="fixed",
-    show_default=True,
-    help="fixed: one scale for all frames; per_image: each frame's brightest pixel at the peak.",
-)
-@click.option(
-    "--noise",
-    is_flag=True,
-    default=None,
-    help="Sensor noise: shot, read noise, background, well [sensor.noise].",
-)
-@click.option(
-    "--peak-electrons",
-    type=POSITIVE,
-    help="Mean e- at an in-focus particle's peak [sensor.peak_electrons].",
-)
-@click.option("--background-e", type=FINITE, help="Background, e-/px [sensor.background_e].")
-@click.option(
-    "--mie", is_flag=True, default=None, help="Weigh each ray by its Mie intensity [mie.enabled]."
-)
-@engine_option
-@click.option(
-    "--interp",
-    type=click.Choice(["trilinear", "texture", "bspline3"]),
-    help="Interpolation of the gridded field [integrator.interp].",
-)
-@click.option(
-    "--precision",
-    type=click.Choice(["f32", "f32c", "f64"]),
-    help="Accumulation precision [integrator.precision].",
-)
-@step_option
-@device_option
-@click.option("--seed", type=INDEX, help="Random seed of the tracers [tracers.seed].")
 @click.option(
     "-o",
     "--output",
@@ -326,43 +401,13 @@ def render(
       rimcl piv render scene.toml --case C4 -o water
       rimcl piv analyze water_field_A.tif water_field_B.tif -o water_vectors.h5
     """
-    import dataclasses
-
     from rimcl.piv.render import run_piv_render
-    from rimcl.piv.study import configs_from_study
     from rimcl.piv.truth import check_outputs, write_piv_render
-    from rimcl.scene.command import command_case
-    from rimcl.scene.study_config import StudyConfig
 
     check_outputs(prefix, overwrite)
-    fan, pupil_rays = options.pop("fan"), options.pop("pupil_rays")
-    given = [
-        name
-        for name, v in (("--rays", options["rays"]), ("--fan", fan), ("--pupil-rays", pupil_rays))
-        if v is not None
-    ]
-    if len(given) > 1:
-        raise click.UsageError(f"{' and '.join(given)} both set the rays per tracer: give one")
-    if fan is not None or pupil_rays is not None:
-        options["rays"] = fan**2 if fan is not None else pupil_rays
-    if options["camera"] is None and (fan is not None or pupil_rays is not None):
-        # --fan alone asks for the plane camera (--pupil-rays for the pupil), as in rimcl study
-        options["camera"] = "plane" if fan is not None else "pupil"
-    overrides = {RENDER_SCENE_KEYS[name]: value for name, value in options.items()}
-    parsed_step = parse_step(step)
-    if isinstance(parsed_step, float):
-        overrides["integrator.step"] = parsed_step
-    scene = command_scene(scene_file, scene_option, overrides)
-    case, k_rho = command_case(scene, case, k_rho)
-    piv_config, configs = configs_from_study(StudyConfig.from_scene(scene))
-    piv_config = dataclasses.replace(
-        piv_config,
-        imaging=dataclasses.replace(
-            piv_config.imaging, peak_fraction=peak_fraction, scaling=scaling
-        ),
+    scene, case, k_rho, piv_config, configs = frame_configs(
+        scene_file, scene_option, case, k_rho, peak_fraction, scaling, step, options
     )
-    if isinstance(parsed_step, str):
-        configs["integrator"] = dataclasses.replace(configs["integrator"], step=parsed_step)
     result = run_piv_render(
         scene["field"]["path"] or None,
         case=case,
@@ -389,9 +434,7 @@ def render(
 
 
 @piv.command()
-@field_option
-@case_option
-@k_rho_option
+@piv_frame_options
 @click.option("--frames", type=click.IntRange(min=2), default=5, show_default=True)
 @click.option(
     "--seeds",
@@ -399,81 +442,61 @@ def render(
     show_default=True,
     help="Comma-separated seeds: one independent realisation each.",
 )
-@click.option(
-    "--pixels", type=COUNT, default=512, show_default=True, help="Pixels across the field of view."
-)
-@click.option("--density", type=POSITIVE, default=0.03, show_default=True, help="Per pixel.")
-@click.option("--fan", type=COUNT, default=8, show_default=True, help="M: M×M rays per tracer.")
-@click.option("--dt", type=POSITIVE, default=0.02, show_default=True, help="Time between frames.")
-@click.option("--start-frame", type=INDEX, default=0, show_default=True)
-@click.option("--length-m", type=POSITIVE, default=None, help="Metres per field length unit.")
-@click.option("--time-s", type=POSITIVE, default=None, help="Seconds per field time unit.")
-@click.option("--noise", is_flag=True, help="Sensor noise: shot, read noise, background, well.")
-@engine_option
-@device_option
 @click.option("-o", "--output", "prefix", default="seq", show_default=True, help="Prefix.")
 @overwrite_option
 @handle_errors
 def sequence(
-    field_path,
+    scene_file,
+    scene_option,
     case,
     k_rho,
+    peak_fraction,
+    scaling,
+    step,
     frames,
     seeds,
-    pixels,
-    density,
-    fan,
-    dt,
-    start_frame,
-    length_m,
-    time_s,
-    noise,
-    engine,
-    device_spec,
     prefix,
     overwrite,
+    **options,
 ):
-    """Time-resolved PIV: FRAMES frames DT apart per seed, dense truth, particle tables.
+    """Time-resolved PIV from a scene (SCENE_FILE, default: the default scene): FRAMES
+    exposures piv.dt apart per seed, through the field, with the dense truth and the
+    particle tables.
 
-    Writes PREFIX_seed<s>_<k>.tif and PREFIX_seed<s>_truth.h5 per seed (truth in px per
-    frame, and in m/s with --length-m and --time-s).
+    The options and the scene are those of ``rimcl piv render``. Writes
+    PREFIX_seed<s>_<k>.tif and PREFIX_seed<s>_truth.h5 per seed (truth in px per frame,
+    and in m/s with the scene's field.length_m and field.time_s).
 
     \b
     Example:
       rimcl piv sequence --case C2 --frames 5 --seeds 0,1,2 -o c2
     """
     from rimcl.core.errors import RimclError
-    from rimcl.fields.field_loading import case_arguments
-    from rimcl.piv.imaging_config import PivImaging
-    from rimcl.piv.render import PivConfig
     from rimcl.piv.sequence import (
         check_sequence_outputs,
         run_piv_sequence,
         write_piv_sequence,
     )
-    from rimcl.scene.config import CameraConfig, RunConfig, SensorConfig
 
     try:
         seed_list = [int(s) for s in seeds.split(",") if s.strip()]
     except ValueError:
         raise RimclError(f"--seeds takes comma-separated integers, got {seeds!r}") from None
     check_sequence_outputs(prefix, seed_list, frames, overwrite)
-    case, k_rho = case_arguments(field_path, case, k_rho)
+    scene, case, k_rho, piv_config, configs = frame_configs(
+        scene_file, scene_option, case, k_rho, peak_fraction, scaling, step, options
+    )
     made = run_piv_sequence(
-        field_path,
+        scene["field"]["path"] or None,
         case=case,
         k_rho=k_rho,
-        piv=PivConfig(
-            imaging=PivImaging(pixels=pixels, density=density), dt=dt, start_frame=start_frame
-        ),
+        piv=piv_config,
         frames=frames,
         seeds=seed_list,
-        camera=CameraConfig(kind="plane", fan=fan),
-        run=RunConfig(device=device_spec, **({} if engine is None else {"engine": engine})),
-        sensor=SensorConfig(noise=noise),
-        length_m=length_m,
-        time_s=time_s,
+        length_m=scene["field"]["length_m"],
+        time_s=scene["field"]["time_s"],
         progress=True,
+        **configs,
     )
     for result in made:
         paths = write_piv_sequence(prefix, result, overwrite=overwrite)

@@ -1,6 +1,7 @@
 """Time-resolved PIV sequences (rimcl.piv.sequence): frames, dense truth, particle tables."""
 
 import dataclasses
+import json
 
 import h5py
 import numpy as np
@@ -79,3 +80,32 @@ def test_cli_writes_one_set_of_files_per_seed(box, tmp_path):
     for seed in (0, 1):
         assert (tmp_path / f"s_seed{seed}_001.tif").exists()
         assert (tmp_path / f"s_seed{seed}_truth.h5").exists()
+
+
+def test_cli_takes_a_scene_file_as_piv_render_does(box, tmp_path):
+    """The sequence's frames follow the scene's [piv] and camera sections, as piv render's."""
+    from click.testing import CliRunner
+
+    from rimcl.cli.main import cli
+
+    scene = tmp_path / "scene.toml"
+    scene.write_text(
+        f'[field]\npath = "{box}"\nlength_m = 0.05\ntime_s = 2.0\n'
+        '[camera]\nkind = "plane"\n[piv]\npixels = 24\nrays = 4\ndt = 0.05\nwindow = 8\n',
+        encoding="utf-8",
+    )
+    out = tmp_path / "s"
+    ok = CliRunner().invoke(
+        cli, ["piv", "sequence", str(scene), "--case", "C2", "--frames", "2", "-o", str(out)]
+    )
+    assert ok.exit_code == 0, ok.output
+    with h5py.File(f"{out}_seed0_truth.h5", "r") as h5:
+        assert h5["truth/dx"].shape == (1, 24, 24)
+        assert np.allclose(h5["times"][1] - h5["times"][0], 0.05)
+        # the scene's scales give the truth in m/s: px/frame × (m per px) / (s per frame)
+        config = json.loads(h5.attrs["config"])
+        metres_per_px = 0.05 * config["imaging"]["pixel_size"]
+        assert config["length_m"] == 0.05 and config["time_s"] == 2.0
+        expected = h5["truth/dx"][...] * metres_per_px / (0.05 * 2.0)
+        assert np.abs(expected).max() > 0
+        np.testing.assert_allclose(h5["truth/u_ms"][...], expected, rtol=1e-12)
