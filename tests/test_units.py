@@ -8,6 +8,7 @@ import pytest
 
 from rimcl.core.errors import RimclError
 from rimcl.scene.load import load_scene
+from rimcl.stats.render_file import load_render
 from rimcl.stats.units import scales
 from rimcl.study.answer import piv_units
 from rimcl.study.run import run_study
@@ -186,16 +187,24 @@ def test_case_and_piv_files_open_with_xarray_as_named_dimensions_with_units(stud
     assert set(tracers.coords) >= {"id", "frame", "time"}
     assert tracers["x3_meas"].attrs["units"] == "L0"
     assert tracers["x3_meas"].attrs["si_per_unit"] == pytest.approx(LENGTH_M)
-    grid = tracers.set_index(row=["id", "frame"]).unstack("row")
-    assert grid["x3_meas"].dims == ("id", "frame")
-    assert grid["x3_meas"].shape == (TINY["tracers.count"], TINY["time.frames"])
+    assert tracers["x3_meas"].dims == ("id", "frame")
+    assert tracers["x3_meas"].shape == (TINY["tracers.count"], TINY["time.frames"])
+    assert tracers["time"].dims == ("frame",)
     velocity = xr.open_dataset(case_file, group="velocity", engine="h5netcdf")
+    assert velocity["u3_meas"].dims == ("id", "frame")
     assert velocity["u3_meas"].attrs["units"] == "L0/T0"
     assert velocity["u3_meas"].attrs["si_per_unit"] == pytest.approx(LENGTH_M / TIME_S)
+    # the same numbers as rimcl's reader, frame-major
+    tables = load_render(case_file)
+    for data, table in ((tracers, tables.tracers), (velocity, tables.velocity)):
+        for name in ("x3_meas", "u3_meas", "flags"):
+            if name in data:
+                flat = data[name].transpose("frame", "id").values.reshape(-1)
+                np.testing.assert_array_equal(flat, table[name])
     rays = xr.open_dataset(case_file, group="rays", engine="h5netcdf")
     assert "ray" in rays.dims
     piv = xr.open_dataset(out / "piv" / "C3.h5", engine="h5netcdf")
     assert piv["dx_field"].dims == ("row", "column") and piv["dx_field"].attrs["units"] == "px"
     np.testing.assert_array_equal(piv["row"].values, piv["y"].values[:, 0])
     # the tables' numbers are the file's columns
-    assert stats["cases"][0]["n_tracers"] == grid.sizes["id"]
+    assert stats["cases"][0]["n_tracers"] == tracers.sizes["id"]
