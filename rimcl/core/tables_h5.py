@@ -87,6 +87,40 @@ def label_table(group, index=None, units=None, row_name=ROW_DIMENSION):
             dataset.attrs["coordinates"] = " ".join(keys)
 
 
+def add_scale(group, name, values, units="1"):
+    """A 1-D dataset of ``group`` made a dimension scale of its own name, with units.
+
+    Text values are stored as UTF-8 strings (xarray reads them as ``str``).
+
+    Returns
+    -------
+    h5py.Dataset
+    """
+    import h5py
+
+    values = np.asarray(values)
+    if values.dtype.kind == "U":
+        values = values.astype(h5py.string_dtype())
+    scale = group.create_dataset(name, data=values)
+    scale.make_scale(name)
+    scale.attrs["units"] = units
+    return scale
+
+
+def write_variable(group, name, values, dimensions, units):
+    """A dataset of ``group`` whose axes are the group's scales named in ``dimensions``.
+
+    Returns
+    -------
+    h5py.Dataset
+    """
+    dataset = group.create_dataset(name, data=values)
+    for axis, dimension in enumerate(dimensions):
+        dataset.dims[axis].attach_scale(group[dimension])
+    dataset.attrs["units"] = units
+    return dataset
+
+
 def _rectangle(table):
     """``(ids, frames)`` of a frame-major table holding every tracer at every frame
     (``id = tile(ids, F)``, ``frame = repeat(frames, N)``, ids unique), else None."""
@@ -135,27 +169,20 @@ def write_tracer_table(group, table, units=None):
         return
     tracer_ids, frame_values = shape
     count, frames = tracer_ids.size, frame_values.size
-    scales = {}
     for name, values in zip(TRACER_DIMENSIONS, (tracer_ids, frame_values), strict=True):
-        scales[name] = group.create_dataset(name, data=values)
-        scales[name].make_scale(name)
-        scales[name].attrs["units"] = units(name)
+        add_scale(group, name, values, units(name))
     per_frame = []
     for name, values in table.items():
-        if name in scales:
+        if name in TRACER_DIMENSIONS:
             continue
         grid = np.asarray(values).reshape(frames, count).T  # (id, frame)
         if name in PER_FRAME_COLUMNS and np.array_equal(grid, np.repeat(grid[:1], count, 0)):
-            dataset = group.create_dataset(name, data=grid[0])
-            dataset.dims[0].attach_scale(scales["frame"])
+            write_variable(group, name, grid[0], ("frame",), units(name))
             per_frame.append(name)
         else:
-            dataset = group.create_dataset(name, data=grid)
-            for axis, dimension in enumerate(TRACER_DIMENSIONS):
-                dataset.dims[axis].attach_scale(scales[dimension])
-        dataset.attrs["units"] = units(name)
+            write_variable(group, name, grid, TRACER_DIMENSIONS, units(name))
     for name in group:
-        if name not in scales and name not in per_frame and per_frame:
+        if name not in TRACER_DIMENSIONS and name not in per_frame and per_frame:
             group[name].attrs["coordinates"] = " ".join(per_frame)
 
 
@@ -207,19 +234,15 @@ def label_grid(group, rows, columns, units):
     units : callable
         Column name to its ``units`` text; the scales get ``units(name)`` of their name.
     """
-    scales = []
-    for name, values in (("row", rows), ("column", columns)):
-        if name in group:
-            return
-        group.create_dataset(name, data=np.asarray(values))
-        group[name].make_scale(name)
-        group[name].attrs["units"] = units(name)
-        scales.append(group[name])
+    if "row" in group or "column" in group:
+        return
+    add_scale(group, "row", rows, units("row"))
+    add_scale(group, "column", columns, units("column"))
     shape = (len(rows), len(columns))
     for name in group:
         dataset = group[name]
         if dataset.shape != shape or name in ("row", "column"):
             continue
-        for axis, scale in enumerate(scales):
-            dataset.dims[axis].attach_scale(scale)
+        for axis, scale in enumerate(("row", "column")):
+            dataset.dims[axis].attach_scale(group[scale])
         dataset.attrs["units"] = units(name)
