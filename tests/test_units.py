@@ -206,5 +206,13 @@ def test_case_and_piv_files_open_with_xarray_as_named_dimensions_with_units(stud
     piv = xr.open_dataset(out / "piv" / "C3.h5", engine="h5netcdf")
     assert piv["dx_field"].dims == ("row", "column") and piv["dx_field"].attrs["units"] == "px"
     np.testing.assert_array_equal(piv["row"].values, piv["y"].values[:, 0])
+    # the truth in m/s: one pixel of displacement in Δt is pixel · length_m / (Δt · time_s)
+    block = stats["cases"][0]["piv"]
+    assert piv.attrs["length_m"] == LENGTH_M and piv.attrs["time_s"] == TIME_S
+    per_px = block["pixel_size_over_L"] * block["length_L"] * LENGTH_M / (block["dt"] * TIME_S)
+    assert piv.attrs["m_s_per_px"] == pytest.approx(per_px, rel=1e-12)
+    assert piv["u_true_ms"].dims == ("row", "column") and piv["u_true_ms"].attrs["units"] == "m/s"
+    np.testing.assert_array_equal(piv["u_true_ms"], piv["dx_true"] * piv.attrs["m_s_per_px"])
+    np.testing.assert_array_equal(piv["v_true_ms"], piv["dy_true"] * piv.attrs["m_s_per_px"])
     # the tables' numbers are the file's columns
     assert stats["cases"][0]["n_tracers"] == tracers.sizes["id"]
