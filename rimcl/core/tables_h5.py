@@ -107,14 +107,16 @@ def add_scale(group, name, values, units="1"):
     return scale
 
 
-def write_variable(group, name, values, dimensions, units):
+def write_variable(group, name, values, dimensions, units, **options):
     """A dataset of ``group`` whose axes are the group's scales named in ``dimensions``.
+
+    ``options`` go to ``h5py.Group.create_dataset`` (compression, ...).
 
     Returns
     -------
     h5py.Dataset
     """
-    dataset = group.create_dataset(name, data=values)
+    dataset = group.create_dataset(name, data=values, **options)
     for axis, dimension in enumerate(dimensions):
         dataset.dims[axis].attach_scale(group[dimension])
     dataset.attrs["units"] = units
