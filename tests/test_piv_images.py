@@ -336,6 +336,27 @@ def test_figures_of_two_cases(box, device, tmp_path):
     assert pdfs["f"]["G"] == [strong.stats["G"]]
     maps = json.loads((tmp_path / "piv_error_maps.json").read_text())["panels"]
     assert maps["baseline C4"]["magnitude_px"][0][0] is None
+    # in your units where the field's scales are known: without them, pixels alone
+    from test_figures import layout_problems
+
+    from rimcl.piv.figures import draw_piv_figure
+
+    assert strong.stats["length_m"] is None  # the library's default plane camera
+    figure, _ = draw_piv_figure("piv_error_pdfs", cases[::-1])
+    assert not [child for ax in figure.axes for child in ax.child_axes]
+    scaled = [(v, {**s, "length_m": 0.01, "time_s": 0.5}) for v, s in cases[::-1]]
+    figure, _ = draw_piv_figure("piv_error_pdfs", scaled)
+    (second,) = [child for ax in figure.axes for child in ax.child_axes]
+    assert second.get_ylabel() == "rms per-vector error (mm/s)"
+    pixel = strong.stats["pixel_size_over_L"] * strong.stats["length_L"]
+    # one pixel in Δt: pixel · 1 cm / (Δt · 0.5 s), in mm/s
+    assert second._functions[0](1.0) == pytest.approx(pixel * 10.0 / (strong.stats["dt"] * 0.5))
+    # what the scales add stays clear of the rest (the PDF panels' corner ticks '0.0' and
+    # '10^-2' sit within 2 px of each other with or without scales: not checked here)
+    assert [p for p in layout_problems(figure) if "second axis" in p or "cut" in p] == []
+    figure, _ = draw_piv_figure("piv_vectors", scaled)
+    assert f"1 px = {pixel * 1e4:.3g} µm on the sheet" in figure._suptitle.get_text()
+    assert layout_problems(figure) == []
 
 
 def test_ray_deposit_is_the_exact_renderer():

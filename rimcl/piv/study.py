@@ -290,7 +290,8 @@ def case_statistics(render, vectors, settings):
     Returns
     -------
     dict
-        ``name, G, delta_n_max, length_L, pixel_size_over_L, dt, motion`` (the motion
+        ``name, G, delta_n_max, length_L, pixel_size_over_L, dt``, ``length_m`` and
+        ``time_s`` (the field's scales, None where unknown), ``motion`` (the motion
         model, :data:`rimcl.piv.tracer_motion.MOTION_SHEET` or ``MOTION_3D``), ``n_tracers,
         n_vectors, n_used, n_excluded`` (by reason), ``velocity`` (refraction error ``u' - u^ref``:
         ``u2, u3, magnitude`` error summaries and ``angle_deg_median``), ``optics`` (the
@@ -324,6 +325,9 @@ def case_statistics(render, vectors, settings):
         "length_L": length,
         "pixel_size_over_L": render.pixel_size / length,
         "dt": render.dt,
+        # metres per field length unit and seconds per field time unit, None where unknown
+        "length_m": render.config.get("length_m"),
+        "time_s": render.config.get("time_s"),
         "motion": render.motion,
         "n_tracers": int(render.reference.positions.shape[1]),
         "n_vectors": int(used.size),
