@@ -188,7 +188,7 @@ def write_tracer_table(group, table, units=None):
             group[name].attrs["coordinates"] = " ".join(per_frame)
 
 
-def read_table(group):
+def read_table(group, names=None):
     """The columns of a table group as 1-D arrays, frame-major, in either layout.
 
     ``(id, frame)`` datasets (:func:`write_tracer_table`) are flattened to one row per
@@ -198,27 +198,30 @@ def read_table(group):
     Parameters
     ----------
     group : h5py.Group
+    names : iterable of str, optional
+        Read only these columns (those the group holds); default all.
 
     Returns
     -------
     dict of str to ndarray, 1-D
     """
-    datasets = {name: group[name] for name in group}
-    if not any(dataset.ndim == 2 for dataset in datasets.values()) or "id" not in datasets:
+    every = {name: group[name] for name in group}
+    wanted = every if names is None else {n: every[n] for n in names if n in every}
+    if "id" not in every or not any(dataset.ndim == 2 for dataset in every.values()):
         return {
             name: np.asarray(dataset[()])
-            for name, dataset in datasets.items()
+            for name, dataset in wanted.items()
             if not (name == ROW_DIMENSION and dataset.is_scale)
         }
-    tracer_ids = np.asarray(datasets["id"][()])
-    frames = int(datasets["frame"].shape[0]) if "frame" in datasets else 1
+    count = int(every["id"].shape[0])
+    frames = int(every["frame"].shape[0]) if "frame" in every else 1
     columns = {}
-    for name, dataset in datasets.items():
+    for name, dataset in wanted.items():
         values = np.asarray(dataset[()])
         if name == "id":
             columns[name] = np.tile(values, frames)
         elif values.ndim == 1:  # the frame scale and per-frame columns
-            columns[name] = np.repeat(values, tracer_ids.size)
+            columns[name] = np.repeat(values, count)
         else:
             columns[name] = values.T.reshape(-1)
     return columns

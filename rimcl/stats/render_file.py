@@ -162,18 +162,18 @@ def _flag_bits(raw, path):
 
 def _read_group(h5file, group, columns, path, optional=()):
     """Columns of one group; ``optional`` column sets are read when all of a set is there."""
-    everything = read_table(h5file[group])
-    missing = [name for name in columns if name not in everything]
+    present = set(h5file[group])
+    missing = [name for name in columns if name not in present]
     if missing:
         raise RimclError(f"{path}: group {group!r} lacks datasets {', '.join(missing)}")
     names = list(columns)
     for extra in (NOTE_COLUMN,), ("frame",), *optional:
-        present = [name for name in extra if name in everything]
-        if present and len(present) < len(extra):
+        held = [name for name in extra if name in present]
+        if held and len(held) < len(extra):
             absent = ", ".join(name for name in extra if name not in present)
-            raise RimclError(f"{path}: group {group!r} has {present[0]} but lacks {absent}")
-        names += [name for name in present if name not in names]
-    table = {name: everything[name] for name in names}
+            raise RimclError(f"{path}: group {group!r} has {held[0]} but lacks {absent}")
+        names += [name for name in held if name not in names]
+    table = read_table(h5file[group], names)
     lengths = {name: values.shape for name, values in table.items()}
     if len(set(lengths.values())) != 1 or any(len(shape) != 1 for shape in lengths.values()):
         raise RimclError(f"{path}: datasets of group {group!r} differ in shape: {lengths}")
