@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from rimcl.core.errors import RimclError
+from rimcl.core.tables_h5 import label_table, read_table
 from rimcl.fields.field_writer import write_field
 from rimcl.imaging.centroid import TracerFlag
 from rimcl.optics.camera import PupilCamera, Scene
@@ -397,6 +398,23 @@ def test_write_render_file_layout(blobs_file, device, tmp_path):
     with xr.open_dataset(path, group="tracers", engine="h5netcdf") as data:
         assert data["time"].dims == ("frame",) and data["time"].attrs["units"] == "T0"
         np.testing.assert_array_equal(data["time"], result.tracers["time"][:: SMALL["tracers"]])
+    # a file of schema version 1 (1-D rows with a row dimension) still reads the same
+    old = tmp_path / "version1.h5"
+    old.write_bytes(path.read_bytes())
+    with h5py.File(old, "a") as h5:
+        h5.attrs["schema_version"] = 1
+        for group in ("tracers", "velocity", "acceleration"):
+            columns = read_table(h5[group])
+            del h5[group]
+            table = h5.create_group(group)
+            for name, values in columns.items():
+                table[name] = values
+            label_table(table, None if group == "tracers" else "id")
+    again = load_render(old)
+    for group in ("tracers", "velocity", "acceleration"):
+        assert getattr(again, group).keys() == getattr(tables, group).keys()
+        for name, values in getattr(tables, group).items():
+            np.testing.assert_array_equal(getattr(again, group)[name], values, err_msg=name)
     image_path = tmp_path / "frame.png"
     write_frame_image(image_path, result)
     from PIL import Image
