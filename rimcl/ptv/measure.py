@@ -11,7 +11,8 @@ in :attr:`RenderResult.reference`; pass it to later calls with the same configur
 (and seed) to skip recomputing it, as a study over cases does.
 
 Output file (``rimcl_schema = "render"``, ``schema_version = 2``), written by
-:func:`rimcl.ptv.render_file.write_render`; the README documents every dataset.
+:func:`rimcl.ptv.render_file.write_render`; the docs' render file format page documents
+every dataset.
 """
 
 import json

@@ -4,7 +4,7 @@
 :func:`merge_results` joins the results of tracer shards into the whole run's;
 :func:`write_render` writes the render file (``rimcl_schema = "render"``,
 ``schema_version = 2``: per-tracer tables as ``(id, frame)`` datasets; every dataset
-documented in the README) and
+documented on the render file format page of the docs) and
 :func:`write_frame_image` the full first frame as a 16-bit PNG or TIFF.
 """
 
