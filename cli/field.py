@@ -118,7 +118,7 @@ def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, sheet
 
 
 @field.command(name="import")
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, required=True, type=click.Path())  # a Zarr store: a folder
 @click.option(
     "--axes",
     default="x,y,z",
@@ -206,7 +206,8 @@ def import_(inputs, axes, crop, stride, frames, t0, dt, boundary, period, gradie
             base_temperature, n_ref, output, overwrite):  # fmt: skip
     """Import your own flow, or JHTDB cut-outs, as a rimcl field file.
 
-    CF-convention netCDF-4/HDF5 files (and .npz files) of a temperature, salinity,
+    CF-convention netCDF-4/HDF5 files (Zarr stores where xarray and zarr are installed,
+    and .npz files) of a temperature, salinity,
     density, refractive index or delta_n, with their coordinates and velocity u, v, w:
     units from the attributes; --depth-axis names the camera's depth. A temperature or
     salinity becomes the fluid's refractive index (the file then runs "as is", case
@@ -218,6 +219,7 @@ def import_(inputs, axes, crop, stride, frames, t0, dt, boundary, period, gradie
 
     \b
       rimcl field import tank.nc --depth-axis y -o tank.h5
+      rimcl field import tank.zarr --depth-axis y -o tank.h5
       rimcl field import mixing_0285.h5 mixing_0286.h5 -o jhtdb.h5
       rimcl field import cutout.nc --axes z,y,x --crop 0:128,:,: --stride 2 -o jhtdb.h5
     """
@@ -227,7 +229,7 @@ def import_(inputs, axes, crop, stride, frames, t0, dt, boundary, period, gradie
     cf_options = (depth_axis, variable, quantity, units, velocity, n_ref)
     if any(v is not None for v in cf_options) or is_cf_input(inputs):
         if len(inputs) != 1:
-            raise RimclError("import one CF dataset or .npz file at a time")
+            raise RimclError("import one CF dataset, Zarr store or .npz file at a time")
         written = import_dataset(
             inputs[0],
             output,

@@ -424,9 +424,13 @@ def render(
         f"frames {' x '.join(map(str, result.field.images.shape[1:]))} px"
     )
     rms = [np.sqrt(np.nanmean(truth[name] ** 2)) for name in ("dx", "dy")]
+    speed = ""  # in mm/s too where the field's scales are known
+    if result.m_s_per_px is not None:
+        mm_s = [value * result.m_s_per_px * 1e3 for value in rms]
+        speed = f" ({mm_s[0]:.3g} and {mm_s[1]:.3g} mm/s)"
     click.echo(
         f"true displacement over {piv_config.settings.window} px windows: rms dx {rms[0]:.3g} px, "
-        f"dy {rms[1]:.3g} px"
+        f"dy {rms[1]:.3g} px{speed}"
     )
     click.echo(f"rays through the field: {result.field.ray_counts}")
     click.echo(f"motion: {result.motion}")

@@ -74,6 +74,12 @@ def test_trace_writes_the_fan_with_status_counts_and_config(device, tmp_path):
         np.testing.assert_array_equal(f["rays/tracer_id"][()], np.repeat(np.arange(3), 16))
         origins = f["rays/origin"][()]
         assert np.all(origins[:, 0] == 0.0)
+    import xarray as xr
+
+    rays = xr.open_dataset(out, group="rays", engine="h5netcdf")  # named dimensions, units
+    assert rays["origin"].dims == ("ray", "axis") and rays["deflection"].dims == ("ray",)
+    np.testing.assert_array_equal(rays["origin"].values, origins)
+    assert rays["n_metric"].attrs["units"] == "1/L0" and rays["end_pos"].attrs["units"] == "L0"
     again = CliRunner().invoke(cli, args)
     assert again.exit_code == 1
     assert "exists" in again.output and "--overwrite" in again.output

@@ -100,6 +100,17 @@ def test_piv_render_runs_a_scene_file(scene, device, tmp_path):
         assert h5.attrs["pixel_size"] == pytest.approx(2 * np.pi / 96)
         config = json.loads(h5.attrs["config"])
     assert config["truth_windows"] == {"window": 16, "overlap": 0.25}
+    # with the field's scales the truth is in m/s too, in the file and on the terminal
+    scaled = tmp_path / "s"
+    result = _run("piv", "render", scene, "--length-m", 0.01, "--time-s", 0.5, "-o", scaled)
+    assert result.exit_code == 0, result.output
+    with h5py.File(f"{scaled}_truth.h5") as h5:
+        per_px = h5.attrs["pixel_size"] * 0.01 / (h5.attrs["dt"] * 0.5)
+        assert h5.attrs["m_s_per_px"] == pytest.approx(per_px, rel=1e-12)
+        dx, u_ms = h5["truth/dx"][()], h5["truth/u_ms"][()]
+    np.testing.assert_allclose(u_ms, dx * per_px, rtol=1e-12)
+    rms = np.sqrt(np.nanmean(dx**2)) * per_px * 1e3
+    assert f"({rms:.3g} and " in result.output and " mm/s)" in result.output
 
 
 def test_trace_runs_a_scene_file(scene, device, tmp_path):

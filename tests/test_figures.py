@@ -60,6 +60,13 @@ def drawn_texts(figure, renderer):
     if figure._suptitle is not None:
         add(figure._suptitle, "suptitle")
     found += [("figure legend", legend.get_window_extent(renderer)) for legend in figure.legends]
+
+    def add_axis(axis, where):
+        add(axis.label, f"{where} {axis.axis_name}label")
+        for tick in axis._update_ticks():
+            for label in (tick.label1, tick.label2):
+                add(label, f"{where} tick {label.get_text()!r}")
+
     for index, ax in enumerate(figure.axes):
         if not ax.axison:
             continue
@@ -67,9 +74,11 @@ def drawn_texts(figure, renderer):
         add(ax._left_title, f"{where} title")
         add(ax.title, f"{where} centre title")
         for axis in (ax.xaxis, ax.yaxis):
-            add(axis.label, f"{where} {axis.axis_name}label")
-            for tick in axis._update_ticks():
-                add(tick.label1, f"{where} tick {tick.label1.get_text()!r}")
+            add_axis(axis, where)
+        # secondary axes (physical units) are children of their axes
+        for child in ax.child_axes:
+            for axis in (child.xaxis, child.yaxis):
+                add_axis(axis, f"{where} second axis")
         if ax.get_legend() is not None:
             found.append((f"{where} legend", ax.get_legend().get_window_extent(renderer)))
         for text in ax.texts:
@@ -326,6 +335,7 @@ def test_position_error_axes_carry_micrometres_where_the_scene_gives_the_size(st
 
     def micrometre_axes(all_tables):
         figure, _ = draw_figure("position_error", all_tables, stats)
+        assert layout_problems(figure) == []
         return [
             child
             for ax in figure.axes
@@ -341,6 +351,47 @@ def test_position_error_axes_carry_micrometres_where_the_scene_gives_the_size(st
         forward, inverse = axis._functions
         assert forward(1e-3) == pytest.approx(1e-3 * tables[0].length * 0.01 * 1e6)
         assert inverse(forward(2e-4)) == pytest.approx(2e-4)
+
+
+def test_maps_and_dt_sweep_speak_physical_units_where_the_scales_are_known(study):
+    import dataclasses
+
+    tables, stats, _ = study
+    _, plain = draw_figure("maps", tables, stats)
+    truth = plain["panels"]["u3 truth"]
+    assert truth["units"] == {"x2": "field length units", "x3": "field length units",
+                              "value": "field units"}  # fmt: skip
+    # 1 cm and 0.5 s per field unit: 10 mm per length unit, 20 mm/s per velocity unit,
+    # 0.04 m/s² per acceleration unit
+    scaled = [dataclasses.replace(t, length_m=0.01, time_s=0.5) for t in tables]
+    figure, data = draw_figure("maps", scaled, stats)
+    for key, unit, factor in (("u3 truth", "mm/s", 20.0), ("a3 truth", "m/s²", 0.04)):
+        panel, before = data["panels"][key], plain["panels"][key]
+        assert panel["units"] == {"x2": "mm", "x3": "mm", "value": unit}
+        np.testing.assert_allclose(panel["x2"], np.asarray(before["x2"]) * 10.0, rtol=1e-12)
+        np.testing.assert_allclose(panel["value"], np.asarray(before["value"]) * factor, rtol=1e-12)
+    labels = {ax.get_xlabel() for ax in figure.axes} | {ax.get_ylabel() for ax in figure.axes}
+    assert {"x2 (mm)", "x3 (mm)", "u3 (mm/s)", "a3 (m/s²)"} <= labels
+    assert layout_problems(figure) == []
+
+    def sweep(time_s):
+        documents = {}
+        for dt in (0.005, 0.02, 0.08):
+            document = json.loads(json.dumps(stats))
+            for case in document["cases"]:
+                case["units"]["scales"]["time_s"] = time_s
+            documents[dt] = document
+        return documents
+
+    figure, data = draw_dt_sweep(sweep(None))
+    assert data["panels"]["ms_per_time_unit"] is None
+    assert not [child for ax in figure.axes for child in ax.child_axes]
+    figure, data = draw_dt_sweep(sweep(0.5))
+    assert data["panels"]["ms_per_time_unit"] == 500.0
+    tops = [child for ax in figure.axes for child in ax.child_axes]
+    assert tops and all(child.get_xlabel() == "Δt (ms)" for child in tops)
+    assert tops[0]._functions[0](0.02) == pytest.approx(10.0)  # 0.02 × 0.5 s = 10 ms
+    assert layout_problems(figure) == []
 
 
 def test_circularity_of_images_of_a_few_pixels_is_not_drawn(tmp_path):

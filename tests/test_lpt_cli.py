@@ -48,14 +48,34 @@ def test_render_writes_dataset(tmp_path, flow):
     with h5py.File(out / "lpt_case_C3.h5", "r") as h5:
         assert h5.attrs["rimcl_schema"] == "lpt_case"
         truth = h5["tracks/x2_true"][()]
-        assert truth.shape == (5, 6)
+        assert truth.shape == (6, 5)  # (id, frame)
         # a tracer whose image is lost in a camera (sensor noise, Mie's dark angles) is
         # flagged and has no measured position; every kept one has one in every frame
         kept = h5["tracks/flags"][()] == 0
         assert kept.sum() >= 4
-        np.testing.assert_array_equal(np.isfinite(h5["tracks/x2_meas"][()]).all(axis=0), kept)
+        np.testing.assert_array_equal(np.isfinite(h5["tracks/x2_meas"][()]).all(axis=1), kept)
         assert set(h5["cameras"]) == {"left", "right"}
         assert "focal_length_mm" in json.loads(h5["cameras/left"].attrs["parameters"])
+        centroids = h5["cameras/left/centroid_meas"][()]
+    # every group opens in xarray with named dimensions and units, holding the same numbers
+    import xarray as xr
+
+    path = out / "lpt_case_C3.h5"
+    tracks = xr.open_dataset(path, group="tracks", engine="h5netcdf")
+    assert tracks["x2_true"].dims == ("id", "frame") and tracks["time"].dims == ("frame",)
+    np.testing.assert_array_equal(tracks["x2_true"].values, truth)
+    assert tracks["x2_meas"].attrs["units"] == "L0"
+    assert tracks["x2_meas"].attrs["si_per_unit"] == stats["length_m"]
+    assert tracks["u3_true"].attrs["units"] == "L0/T0" and tracks["flags"].dims == ("id",)
+    left = xr.open_dataset(path, group="cameras/left", engine="h5netcdf")
+    assert left["centroid_meas"].dims == ("id", "frame", "pixel_axis")
+    assert list(left["pixel_axis"].values) == ["column", "row"]
+    np.testing.assert_array_equal(left["centroid_meas"].values, centroids)
+    assert left["disparity_meas"].dims == ("id", "frame")
+    assert left["disparity_meas"].attrs["units"] == "px"
+    calibration = xr.open_dataset(path, group="calibration", engine="h5netcdf")
+    assert calibration["pixels"].dims == ("camera", "point", "pixel_axis")
+    assert list(calibration["camera"].values) == ["left", "right"]
     folder = out / "dataset" / "C3"
     image = tifffile.imread(folder / "images" / "field" / "left_frame0000.tif")
     assert image.dtype == np.uint16 and image.shape == (200, 320) and image.max() > 0
@@ -65,7 +85,13 @@ def test_render_writes_dataset(tmp_path, flow):
     assert tracks.shape == (30, 12)
     # the CSV's X (mm) is the field's x2 of the case file, scaled by length_m
     np.testing.assert_allclose(
-        tracks[:6, 3], truth[0] * stats["length_m"] * 1e3, rtol=1e-8, atol=1e-9
+        tracks[:6, 3], truth[:, 0] * stats["length_m"] * 1e3, rtol=1e-8, atol=1e-9
+    )
+    truth_file = xr.open_dataset(folder / "truth_tracks.h5", engine="h5netcdf")
+    assert truth_file["position_mm"].dims == ("id", "frame", "axis")
+    assert truth_file["position_mm"].attrs["units"] == "mm"
+    np.testing.assert_allclose(
+        truth_file["position_mm"].sel(axis="X").values, truth * stats["length_m"] * 1e3, rtol=1e-12
     )
     pinhole = json.loads((folder / "left_pinhole.json").read_text())
     matrix = np.asarray(pinhole["dlt_matrix_mm_to_px"])

@@ -9,12 +9,14 @@ import numpy as np
 import pytest
 
 from rimcl.core.errors import RimclError
+from rimcl.core.tables_h5 import label_table, read_table
 from rimcl.fields.field_writer import write_field
 from rimcl.imaging.centroid import TracerFlag
 from rimcl.optics.camera import PupilCamera, Scene
 from rimcl.ptv.measure import run_render
 from rimcl.ptv.render_file import merge_results, write_frame_image, write_render
 from rimcl.scene.config import FluidConfig, MeasureConfig
+from rimcl.stats.render_file import load_render
 
 TIMES = (0.0, 0.01, 0.02)
 OMEGA = 2.0  # solid-body rotation rate of the linear-medium file (rad per time unit)
@@ -356,7 +358,7 @@ def test_write_render_file_layout(blobs_file, device, tmp_path):
     path = tmp_path / "render.h5"
     write_render(path, result)
     with h5py.File(path, "r") as h5:
-        assert h5.attrs["rimcl_schema"] == "render" and h5.attrs["schema_version"] == 1
+        assert h5.attrs["rimcl_schema"] == "render" and h5.attrs["schema_version"] == 2
         assert h5.attrs["case"] == "C1" and h5.attrs["k_rho"] == pytest.approx(2.82e-4)
         assert h5.attrs["length_L"] == pytest.approx(2 * np.pi)
         assert h5.attrs["pixel_size"] == pytest.approx(2 * np.pi / SMALL["pixels"])
@@ -364,13 +366,55 @@ def test_write_render_file_layout(blobs_file, device, tmp_path):
         assert json.loads(h5.attrs["flag_names"])[str(int(TracerFlag.SPLIT))] == "split"
         assert json.loads(h5.attrs["config"])["tracers"] == SMALL["tracers"]
         assert "versions" in h5.attrs and "device" in h5.attrs
-        assert len(h5["tracers/x2_meas"]) == 3 * SMALL["tracers"]
+        assert h5["tracers/x2_meas"].shape == (SMALL["tracers"], 3)  # (id, frame)
         # the paper's differences: velocity at frames 0, 1; acceleration at frame 1
-        assert len(h5["velocity/u2_true"]) == 12 and len(h5["acceleration/a3_meas"]) == 6
+        np.testing.assert_array_equal(h5["velocity/frame"][()], [0, 1])
+        assert h5["velocity/u2_true"].shape == (6, 2) and h5["acceleration/a3_meas"].shape == (6, 1)
         assert "velocity_fit" not in h5  # 3 frames: fewer than the fit window
         assert h5["rays"].attrs["count_ok"] > 0
     with pytest.raises(RimclError, match="exists"):
         write_render(path, result)
+    # one line in xarray: every per-tracer table is (id, frame) arrays with units, and
+    # rimcl's reader gives back the run's frame-major columns exactly
+    import xarray as xr
+
+    tables = load_render(path)
+    for group in ("tracers", "velocity", "acceleration"):
+        table = result.tracers if group == "tracers" else result.kinematics[group]
+        read = getattr(tables, group)
+        frames = len(np.unique(table["frame"]))
+        with xr.open_dataset(path, group=group, engine="h5netcdf") as data:
+            assert data["flags"].dims == ("id", "frame")
+            np.testing.assert_array_equal(data["id"], np.arange(SMALL["tracers"]))
+            for name, values in table.items():
+                if name in read:
+                    np.testing.assert_array_equal(read[name], values, err_msg=name)
+                if name not in ("id", "frame", "time"):
+                    grid = values.reshape(frames, SMALL["tracers"]).T
+                    np.testing.assert_array_equal(data[name].values, grid, err_msg=name)
+            symbol, unit = {"tracers": ("x", "L0"), "velocity": ("u", "L0/T0"),
+                            "acceleration": ("a", "L0/T0^2")}[group]  # fmt: skip
+            assert data[f"{symbol}2_meas"].attrs["units"] == unit
+    with xr.open_dataset(path, group="tracers", engine="h5netcdf") as data:
+        assert data["time"].dims == ("frame",) and data["time"].attrs["units"] == "T0"
+        np.testing.assert_array_equal(data["time"], result.tracers["time"][:: SMALL["tracers"]])
+    # a file of schema version 1 (1-D rows with a row dimension) still reads the same
+    old = tmp_path / "version1.h5"
+    old.write_bytes(path.read_bytes())
+    with h5py.File(old, "a") as h5:
+        h5.attrs["schema_version"] = 1
+        for group in ("tracers", "velocity", "acceleration"):
+            columns = read_table(h5[group])
+            del h5[group]
+            table = h5.create_group(group)
+            for name, values in columns.items():
+                table[name] = values
+            label_table(table, None if group == "tracers" else "id")
+    again = load_render(old)
+    for group in ("tracers", "velocity", "acceleration"):
+        assert getattr(again, group).keys() == getattr(tables, group).keys()
+        for name, values in getattr(tables, group).items():
+            np.testing.assert_array_equal(getattr(again, group)[name], values, err_msg=name)
     image_path = tmp_path / "frame.png"
     write_frame_image(image_path, result)
     from PIL import Image

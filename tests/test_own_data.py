@@ -125,6 +125,48 @@ def test_cli_imports_degc_netcdf_and_npz_temperature(tmp_path):
     np.testing.assert_allclose(a.delta_n + a.n_ref, expected, atol=1e-9)
 
 
+def test_a_zarr_store_imports_the_same_field_as_its_netcdf(tank, tmp_path):
+    """The CF tank written to Zarr by xarray (undecoded, as the file is) imports through
+    ``rimcl field import`` to the very field of the netCDF file."""
+    xr = pytest.importorskip("xarray")
+    pytest.importorskip("zarr")
+    imported, _ = tank
+    with xr.open_dataset(imported.parent / "tank.nc", engine="h5netcdf", decode_cf=False) as nc:
+        nc.to_zarr(tmp_path / "tank.zarr", consolidated=False)
+    out = CliRunner().invoke(
+        cli,
+        ["field", "import", str(tmp_path / "tank.zarr"), "--depth-axis", "y",
+         "-o", str(tmp_path / "zarr.h5")],
+    )  # fmt: skip
+    assert out.exit_code == 0, out.output
+    with FieldFile(imported) as ours, FieldFile(tmp_path / "zarr.h5") as theirs:
+        for key in ("scalar", "scalar_units", "axes", "length_m", "time_s"):
+            assert theirs.attrs[key] == ours.attrs[key], key
+        np.testing.assert_array_equal(theirs.attrs["scalar_range"], ours.attrs["scalar_range"])
+        np.testing.assert_array_equal(theirs.times, ours.times)
+        for k in range(len(ours.times)):
+            np.testing.assert_array_equal(theirs.velocity(k), ours.velocity(k))
+    mine, theirs = load_field(imported), load_field(tmp_path / "zarr.h5")
+    np.testing.assert_array_equal(theirs.delta_n, mine.delta_n)
+    assert theirs.n_ref == mine.n_ref
+    np.testing.assert_array_equal(theirs.origin, mine.origin)
+    np.testing.assert_array_equal(theirs.spacing, mine.spacing)
+
+
+def test_a_zarr_store_without_zarr_installed_is_one_line(tmp_path, monkeypatch):
+    import sys
+
+    (tmp_path / "s.zarr").mkdir()
+    monkeypatch.setitem(sys.modules, "zarr", None)  # import zarr raises ImportError
+    out = CliRunner().invoke(
+        cli, ["field", "import", str(tmp_path / "s.zarr"), "--depth-axis", "y",
+              "-o", str(tmp_path / "s.h5")],
+    )  # fmt: skip
+    assert out.exit_code != 0
+    assert "needs xarray and zarr (pip install xarray zarr)" in out.output
+    assert len(out.output.strip().splitlines()) == 1 and "Traceback" not in out.output
+
+
 def test_salinity_and_density_units(tmp_path):
     axis = np.linspace(0.0, 0.1, 5)
     salt = np.full((5, 5, 5), 10.0) + np.arange(5)[:, None, None]

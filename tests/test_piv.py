@@ -176,6 +176,14 @@ def test_cli_analyze_round_trip(tmp_path):
         assert h5["x"][0, 0] == 15.5 and h5["y"][0, 0] == 15.5
         assert abs(np.mean(h5["dx"][()]) - 0.7) < 0.02
         assert abs(np.mean(h5["dy"][()]) + 0.3) < 0.02
+        dx, valid = h5["dx"][()], h5["valid"][()]
+    import xarray as xr
+
+    vectors = xr.open_dataset(out, engine="h5netcdf")  # one line: named dimensions, units
+    assert vectors["dx"].dims == ("row", "column") and vectors["dx"].attrs["units"] == "px"
+    np.testing.assert_array_equal(vectors["dx"].values, dx)
+    np.testing.assert_array_equal(vectors["valid"].values, valid)
+    assert vectors["column"].values[0] == 15.5 and vectors["peak_ratio"].attrs["units"] == "1"
     again = CliRunner().invoke(cli, args)
     assert again.exit_code == 1 and "exists" in again.output
 

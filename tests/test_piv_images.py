@@ -158,6 +158,42 @@ def test_uniform_flow_truth_and_out_of_plane_motion(box, device):
     assert result.field.ray_counts["ok"] == 2 * len(positions[0]) * 8
 
 
+def test_truth_file_opens_in_xarray_and_gives_the_truth_in_m_s(box, device, tmp_path):
+    import xarray as xr
+
+    from rimcl.piv.truth import write_piv_render
+
+    # 1 cm per field length unit, 0.5 s per field time unit: (u2, u3) = (0.3, -0.2) L0/T0
+    # is 6 mm/s along the columns and 4 mm/s down the rows
+    camera = dataclasses.replace(PUPIL, length_m=0.01)
+    kwargs = {**small(device, time_s=0.5), "camera": camera}
+    result = run_piv_render(box, case="C2", **kwargs)
+    paths = write_piv_render(tmp_path / "run", result)
+    truth = xr.open_dataset(paths["truth"], group="truth", engine="h5netcdf")
+    assert truth["u_ms"].dims == ("row", "column") and truth["u_ms"].attrs["units"] == "m/s"
+    # the field stores the velocity in float32 (0.3 to 4e-8)
+    np.testing.assert_allclose(truth["u_ms"], 0.006, rtol=1e-7)
+    np.testing.assert_allclose(truth["v_ms"], 0.004, rtol=1e-7)
+    factor = result.pixel_size * 0.01 / (result.dt * 0.5)
+    np.testing.assert_array_equal(truth["u_ms"], result.reference.truth["dx"] * factor)
+    assert truth["dx"].attrs["units"] == "px"
+    np.testing.assert_array_equal(truth["column"], result.reference.truth["x"][0])
+    particles = xr.open_dataset(paths["truth"], group="particles", engine="h5netcdf")
+    assert particles["position"].dims == ("id", "frame", "axis")
+    assert list(particles["frame"].values) == ["A", "B"]
+    assert particles["position"].attrs["units"] == "L0"
+    np.testing.assert_array_equal(
+        particles["position"].sel(frame="B").values, result.reference.positions[1]
+    )
+    assert particles["image_point_field"].dims == ("id", "frame", "image_axis")
+    np.testing.assert_array_equal(
+        particles["rays_collected_uniform"].sel(frame="A"), result.uniform.collected[0]
+    )
+    root = xr.open_dataset(paths["truth"], engine="h5netcdf")
+    assert root.attrs["length_m"] == 0.01 and root.attrs["time_s"] == 0.5
+    assert root.attrs["m_s_per_px"] == pytest.approx(factor, rel=1e-15)
+
+
 def test_sheet_velocity_moves_tracers_in_plane_only(tmp_path, device):
     # a file with the sheet velocity only: every tracer keeps its depth and moves with the
     # sheet's (u2, u3), whatever its x1; the out-of-plane u1 is not there to use
@@ -238,7 +274,8 @@ def test_cli_render_writes_frames_and_truth(box, device, tmp_path):
     with h5py.File(tmp_path / "run_truth.h5") as h5:
         assert h5.attrs["rimcl_schema"] == "piv_truth" and "versions" in h5.attrs
         assert h5["truth/dx"].shape == (11, 11)
-        assert h5["particles/position_A"].shape[1] == 3
+        assert h5["particles/position"].shape[1:] == (2, 3)  # (id, frame, axis)
+        assert "m_s_per_px" not in h5.attrs or h5.attrs["m_s_per_px"] > 0
     again = CliRunner().invoke(cli, args)
     assert again.exit_code == 1 and "exists" in again.output
 
@@ -299,6 +336,27 @@ def test_figures_of_two_cases(box, device, tmp_path):
     assert pdfs["f"]["G"] == [strong.stats["G"]]
     maps = json.loads((tmp_path / "piv_error_maps.json").read_text())["panels"]
     assert maps["baseline C4"]["magnitude_px"][0][0] is None
+    # in your units where the field's scales are known: without them, pixels alone
+    from test_figures import layout_problems
+
+    from rimcl.piv.figures import draw_piv_figure
+
+    assert strong.stats["length_m"] is None  # the library's default plane camera
+    figure, _ = draw_piv_figure("piv_error_pdfs", cases[::-1])
+    assert not [child for ax in figure.axes for child in ax.child_axes]
+    scaled = [(v, {**s, "length_m": 0.01, "time_s": 0.5}) for v, s in cases[::-1]]
+    figure, _ = draw_piv_figure("piv_error_pdfs", scaled)
+    (second,) = [child for ax in figure.axes for child in ax.child_axes]
+    assert second.get_ylabel() == "rms per-vector error (mm/s)"
+    pixel = strong.stats["pixel_size_over_L"] * strong.stats["length_L"]
+    # one pixel in Δt: pixel · 1 cm / (Δt · 0.5 s), in mm/s
+    assert second._functions[0](1.0) == pytest.approx(pixel * 10.0 / (strong.stats["dt"] * 0.5))
+    # what the scales add stays clear of the rest (the PDF panels' corner ticks '0.0' and
+    # '10^-2' sit within 2 px of each other with or without scales: not checked here)
+    assert [p for p in layout_problems(figure) if "second axis" in p or "cut" in p] == []
+    figure, _ = draw_piv_figure("piv_vectors", scaled)
+    assert f"1 px = {pixel * 1e4:.3g} µm on the sheet" in figure._suptitle.get_text()
+    assert layout_problems(figure) == []
 
 
 def test_ray_deposit_is_the_exact_renderer():

@@ -41,7 +41,8 @@ def test_sequence_of_a_uniform_flow_knows_its_truth(box, device, tmp_path):
     np.testing.assert_allclose(np.diff(first.pixels, axis=0)[..., 0], 0.015 / pixel, rtol=1e-7)
     assert first.frames.images.shape == (3, 96, 96)
     # independent realisations: other tracers, other frames
-    assert first.positions.shape[1] == second.positions.shape[1]
+    count = first.positions.shape[1]
+    assert second.positions.shape[1] == count
     assert not np.array_equal(first.positions, second.positions)
     assert not np.array_equal(first.frames.images, second.frames.images)
     paths = write_piv_sequence(tmp_path / "seq", first)
@@ -55,8 +56,19 @@ def test_sequence_of_a_uniform_flow_knows_its_truth(box, device, tmp_path):
     with h5py.File(paths[-1]) as h5:
         assert h5.attrs["rimcl_schema"] == "piv_sequence_truth"
         np.testing.assert_array_equal(h5["truth/dx"][...], first.truth_px[..., 0])
-        assert h5["particles/position"].shape == first.positions.shape
+        assert h5["particles/position"].shape == (count, 3, 3)  # (id, frame, axis)
         assert "m/s" in h5.attrs["units"]
+    import xarray as xr
+
+    particles = xr.open_dataset(paths[-1], group="particles", engine="h5netcdf")
+    assert particles["col"].dims == ("id", "frame") and particles["col"].attrs["units"] == "px"
+    np.testing.assert_array_equal(particles["col"].values, first.pixels[..., 0].T)
+    np.testing.assert_array_equal(particles["position"].sel(frame=2), first.positions[2])
+    truth = xr.open_dataset(paths[-1], group="truth", engine="h5netcdf")
+    assert truth["dx"].dims == ("step", "row", "column") and truth["dx"].attrs["units"] == "px"
+    np.testing.assert_array_equal(truth["dy"].values, first.truth_px[..., 1])
+    times = xr.open_dataset(paths[-1], engine="h5netcdf")["times"]
+    assert times.dims == ("frame",) and times.attrs["units"] == "T0"
 
 
 def test_sequence_beyond_the_stored_frames_is_refused(box, device):

@@ -8,6 +8,7 @@ import pytest
 
 from rimcl.core.errors import RimclError
 from rimcl.scene.load import load_scene
+from rimcl.stats.render_file import load_render
 from rimcl.stats.units import scales
 from rimcl.study.answer import piv_units
 from rimcl.study.run import run_study
@@ -107,6 +108,66 @@ def test_physical_values_are_normalised_values_times_the_scales(study):
     )
 
 
+def test_physical_values_are_exactly_the_normalised_ones_times_the_scales(study):
+    """PTV and PIV, in stats.json, stats.csv and summary.md: physical = normalised × scale,
+    to the last bit (the tidy table read back exactly), with the scales the scene's."""
+    out, stats = study
+    case = stats["cases"][0]
+    units, piv = case["units"], case["piv"]
+    for factors in (units["scales"], piv["units"]["scales"]):
+        assert factors["mm_s_per_velocity"] == LENGTH_M / TIME_S * 1e3
+        assert factors["m_s2_per_acceleration"] == LENGTH_M / TIME_S**2
+        assert factors["um_per_length"] == LENGTH_M * 1e6
+    factors = units["scales"]
+    assert factors["dt_ms"] == case["dt"] * TIME_S * 1e3
+    expected = {}  # (quantity, component, statistic, unit) -> value
+    for group in ("velocity", "velocity_fit", "acceleration", "acceleration_fit"):
+        velocity = group.startswith("velocity")
+        unit, factor = (
+            ("mm_s", factors["mm_s_per_velocity"])
+            if velocity
+            else ("m_s2", factors["m_s2_per_acceleration"])
+        )
+        for component, entry in units[group].items():
+            for statistic, values in entry.items():
+                assert values[unit] == values["field"] * factor
+                expected[group, component, statistic, unit.replace("_", "/")] = values[unit]
+                if velocity:
+                    per_frame = values["field"] * factors["px_frame_per_velocity"]
+                    assert values["px_frame"] == per_frame
+                    expected[group, component, statistic, "px/frame"] = per_frame
+    for name, entry in units["position"].items():
+        length = entry["over_L"] * case["length_L"]
+        assert entry["um"] == length * factors["um_per_length"]
+        assert entry["px"] == length * factors["px_per_length"]
+        expected["position_error", "magnitude", name, "um"] = entry["um"]
+        expected["position_error", "magnitude", name, "px"] = entry["px"]
+    piv_pixel = piv["pixel_size_over_L"] * piv["length_L"]
+    for key, px in piv["displacement_px"].items():
+        if not key.endswith("_rms"):
+            continue
+        entry = piv["units"][key]
+        assert entry["px_frame"] == px and entry["field"] == px * piv_pixel / piv["dt"]
+        assert entry["mm_s"] == entry["field"] * piv["units"]["scales"]["mm_s_per_velocity"]
+        expected["piv_displacement", key, "rms", "mm/s"] = entry["mm_s"]
+        expected["piv_displacement", key, "rms", "px/frame"] = px
+    assert len(expected) > 40
+    table = pd.read_csv(out / "stats.csv", float_precision="round_trip")
+    read = {
+        (row.quantity, row.component, row.statistic, row.unit): row.value
+        for row in table.itertuples()
+        if row.unit in ("mm/s", "px/frame", "m/s2", "um", "px")
+    }
+    for key, value in expected.items():
+        assert read[key] == value, key
+    text = (out / "summary.md").read_text()
+    truth = piv["units"]["truth_rms"]
+    assert f"{truth['px_frame']:.3g} ({truth['mm_s']:.3g} mm/s)" in text
+    scales_piv = piv["units"]["scales"]
+    assert f"pixel = {piv['pixel_size_over_L']:.3g} L = {scales_piv['pixel_um']:.3g} µm" in text
+    assert f"Δt = {piv['dt']:.3g} = {scales_piv['dt_ms']:.3g} ms" in text
+
+
 def test_tidy_table_reads_with_pandas_and_matches_stats_json(study):
     out, stats = study
     table = pd.read_csv(out / "stats.csv")
@@ -186,16 +247,32 @@ def test_case_and_piv_files_open_with_xarray_as_named_dimensions_with_units(stud
     assert set(tracers.coords) >= {"id", "frame", "time"}
     assert tracers["x3_meas"].attrs["units"] == "L0"
     assert tracers["x3_meas"].attrs["si_per_unit"] == pytest.approx(LENGTH_M)
-    grid = tracers.set_index(row=["id", "frame"]).unstack("row")
-    assert grid["x3_meas"].dims == ("id", "frame")
-    assert grid["x3_meas"].shape == (TINY["tracers.count"], TINY["time.frames"])
+    assert tracers["x3_meas"].dims == ("id", "frame")
+    assert tracers["x3_meas"].shape == (TINY["tracers.count"], TINY["time.frames"])
+    assert tracers["time"].dims == ("frame",)
     velocity = xr.open_dataset(case_file, group="velocity", engine="h5netcdf")
+    assert velocity["u3_meas"].dims == ("id", "frame")
     assert velocity["u3_meas"].attrs["units"] == "L0/T0"
     assert velocity["u3_meas"].attrs["si_per_unit"] == pytest.approx(LENGTH_M / TIME_S)
+    # the same numbers as rimcl's reader, frame-major
+    tables = load_render(case_file)
+    for data, table in ((tracers, tables.tracers), (velocity, tables.velocity)):
+        for name in ("x3_meas", "u3_meas", "flags"):
+            if name in data:
+                flat = data[name].transpose("frame", "id").values.reshape(-1)
+                np.testing.assert_array_equal(flat, table[name])
     rays = xr.open_dataset(case_file, group="rays", engine="h5netcdf")
     assert "ray" in rays.dims
     piv = xr.open_dataset(out / "piv" / "C3.h5", engine="h5netcdf")
     assert piv["dx_field"].dims == ("row", "column") and piv["dx_field"].attrs["units"] == "px"
     np.testing.assert_array_equal(piv["row"].values, piv["y"].values[:, 0])
+    # the truth in m/s: one pixel of displacement in Δt is pixel · length_m / (Δt · time_s)
+    block = stats["cases"][0]["piv"]
+    assert piv.attrs["length_m"] == LENGTH_M and piv.attrs["time_s"] == TIME_S
+    per_px = block["pixel_size_over_L"] * block["length_L"] * LENGTH_M / (block["dt"] * TIME_S)
+    assert piv.attrs["m_s_per_px"] == pytest.approx(per_px, rel=1e-12)
+    assert piv["u_true_ms"].dims == ("row", "column") and piv["u_true_ms"].attrs["units"] == "m/s"
+    np.testing.assert_array_equal(piv["u_true_ms"], piv["dx_true"] * piv.attrs["m_s_per_px"])
+    np.testing.assert_array_equal(piv["v_true_ms"], piv["dy_true"] * piv.attrs["m_s_per_px"])
     # the tables' numbers are the file's columns
-    assert stats["cases"][0]["n_tracers"] == grid.sizes["id"]
+    assert stats["cases"][0]["n_tracers"] == tracers.sizes["id"]

@@ -63,7 +63,8 @@ def tracer_images(work):
             pixel = float(f.attrs["pixel_size"])
             fov_lo = np.asarray(f.attrs["fov_lo"], dtype=float)
             fov_hi = np.asarray(f.attrs["fov_hi"], dtype=float)
-            x2, x3 = float(f["tracers/x2_true"][0]), float(f["tracers/x3_true"][0])
+            # tracer 0 at frame 0 of the (id, frame) datasets
+            x2, x3 = float(f["tracers/x2_true"][0, 0]), float(f["tracers/x3_true"][0, 0])
         frame = np.asarray(Image.open(work / f"{case}.png"), dtype=float)
         # the PNG holds x3 upwards: row 0 is the top of the field of view
         col = int((x2 - fov_lo[-2]) / pixel)

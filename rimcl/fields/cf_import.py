@@ -1,5 +1,6 @@
-"""Import of your own flow: CF-convention netCDF-4/HDF5 datasets and ``.npz`` files of any
-scalar that sets the refractive index.
+"""Import of your own flow: CF-convention netCDF-4/HDF5 datasets, Zarr stores (where xarray
+and zarr are installed: :mod:`rimcl.fields.zarr_input`) and ``.npz`` files of any scalar that
+sets the refractive index.
 
 The scalar is a density, temperature, salinity, refractive index or index difference δn,
 found by name, by its CF ``standard_name`` or named by the caller; its ``units`` attribute
@@ -46,6 +47,7 @@ from rimcl.fields.jhtdb import (
     parse_frames,
 )
 from rimcl.fields.media import ZERO_CELSIUS_K, Fluid
+from rimcl.fields.zarr_input import is_zarr_store, zarr_variables
 
 #: What a field file's scalar can be (its root attribute ``scalar``).
 QUANTITIES = ("density", "temperature", "salinity", "index", "delta_n")
@@ -416,6 +418,8 @@ def is_cf_input(paths, variable=None):
     if len(paths) != 1:
         return False
     path = paths[0]
+    if is_zarr_store(path):
+        return True
     if path.suffix.lower() == ".npz":
         if not zipfile.is_zipfile(path):
             return False
@@ -447,7 +451,7 @@ def read_dataset(
     boundary="auto",
     period=JHTDB_PERIOD,
 ):
-    """Read a CF netCDF-4/HDF5 dataset or an ``.npz`` file into rimcl's axes.
+    """Read a CF netCDF-4/HDF5 dataset, a Zarr store or an ``.npz`` file into rimcl's axes.
 
     Parameters
     ----------
@@ -482,6 +486,13 @@ def read_dataset(
     handle = None
     if path.suffix.lower() == ".npz":
         variables = _read_npz(path)
+    elif is_zarr_store(path):
+        variables = {
+            name: _Variable(
+                name, dims, attrs, shape, lambda sel=(), r=read, a=attrs: _unpack(r(sel), a)
+            )
+            for name, (dims, attrs, shape, read) in zarr_variables(path).items()
+        }
     else:
         handle, variables = _read_h5(path)
     try:
@@ -543,7 +554,7 @@ def _read(path, variables, depth_axis, variable, quantity, units, velocity, crop
             variables, vel, wanted, frame_of, layout, length_m, time_s, time_dims
         )
     attrs = {
-        **layout.provenance("CF dataset" if path.suffix != ".npz" else "npz", [path], wanted),
+        **layout.provenance(_container(path), [path], wanted),
         "axes": ",".join(f"x{k + 1}={dim_of[a]}" for k, a in enumerate(axes)),
         "scalar": quantity,
         "scalar_variable": scalar.name,
@@ -568,6 +579,12 @@ def _read(path, variables, depth_axis, variable, quantity, units, velocity, crop
         time_s=time_s,
         attrs=attrs,
     )
+
+
+def _container(path):
+    if path.suffix.lower() == ".npz":
+        return "npz"
+    return "CF Zarr store" if is_zarr_store(path) else "CF dataset"
 
 
 def _is_time(variables, dim):

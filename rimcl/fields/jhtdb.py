@@ -419,6 +419,10 @@ def read_cutouts(
     if not paths:
         raise RimclError("no input files given")
     for path in paths:
+        if path.is_dir():
+            raise RimclError(
+                f"{path} is a folder without Zarr metadata, not a file or a Zarr store"
+            )
         if not path.is_file():
             raise RimclError(f"input file {path} does not exist")
     inventory, coordinates = {}, {}

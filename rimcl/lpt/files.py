@@ -1,18 +1,24 @@
 """LPT output files: the case file, and datasets for LPT codes (OpenLPT, MyPTV, DaVis).
 
-**Case file** ``lpt_case_<case>.h5`` (``rimcl_schema = "lpt_case"``, ``schema_version = 1``):
+**Case file** ``lpt_case_<case>.h5`` (``rimcl_schema = "lpt_case"``, ``schema_version = 2``),
+with named dimensions (HDF5 dimension scales) and a ``units`` attribute on every dataset, so that
+``xarray.open_dataset(path, group="tracks", engine="h5netcdf")`` gives ``(id, frame)`` arrays:
 
 - root attributes: ``case``, ``n_ref``, ``length_m``, ``units`` (JSON), ``config`` and
   ``versions`` (JSON);
-- ``tracks/``: ``time (F,)``, ``tracer_id (N,)``, ``flags (N,)`` (1: a ray failed,
-  2: an image off a sensor), and per tracer and frame ``(F, N)`` float64:
-  ``x{1,2,3}_{true,meas,ref}`` (field length units), ``u{1,2,3}_true``, ``a{1,2,3}_true``;
-- ``cameras/<name>/``: ``centroid_meas``, ``centroid_ref`` ``(F, N, 2)`` (px, column/row,
-  pixel (0, 0) centred on the top-left pixel), ``disparity_meas``, ``disparity_ref``
-  ``(F, N)`` (px), ``failed_rays (F, N)``; attributes ``parameters`` (JSON: position,
-  look-at, axes, optics), ``calibration`` (JSON: both fits and their residuals, px) and
-  ``rays`` (JSON: the ray-count choice);
-- ``calibration/``: ``target (M, 3)`` (field units) and ``pixels (C, M, 2)``.
+- ``tracks/``: scales ``id (N,)`` and ``frame (F,)``; ``time (frame)``, ``flags (id)`` (1: a
+  ray failed, 2: an image off a sensor, 4: an image not located), and per tracer and frame
+  ``(id, frame)`` float64: ``x{1,2,3}_{true,meas,ref}``, ``x{1,2,3}_opt_{meas,ref}``
+  (``L0``, field length units; ``si_per_unit`` metres), ``u{1,2,3}_true`` (``L0/T0``),
+  ``a{1,2,3}_true`` (``L0/T0^2``);
+- ``cameras/<name>/``: scales ``id``, ``frame``, ``pixel_axis`` (``column``, ``row``);
+  ``centroid_{meas,ref}``, ``optics_{meas,ref}`` ``(id, frame, pixel_axis)`` (px, pixel
+  (0, 0) centred on the top-left pixel), ``disparity_*`` ``(id, frame)`` (px),
+  ``image_flags_*``, ``peak_*``, ``failed_rays`` ``(id, frame)``; attributes ``parameters``
+  (JSON: position, look-at, axes, optics), ``calibration`` (JSON: both fits and their
+  residuals, px) and ``rays`` (JSON: the ray-count choice);
+- ``calibration/``: scales ``point``, ``axis`` (``x1, x2, x3``), ``camera``, ``pixel_axis``;
+  ``target (point, axis)`` (field units) and ``pixels (camera, point, pixel_axis)`` (px).
 
 **Dataset** (``rimcl lpt render``), in ``<out>/dataset/<case>/``:
 
@@ -23,8 +29,11 @@
   ``X Y Z x1 y1 … xC yC`` (mm, px), with ``X, Y, Z = x2, x3, x1`` from the field's origin;
 - ``cam<k>_pinhole.json``: the fitted DLT matrix (maps ``[X, Y, Z, 1]`` in mm to pixels),
   its residual, and the true camera parameters;
-- ``truth_tracks.h5`` and ``truth_tracks.csv``: ``track_id, frame, time_s, X_mm, Y_mm,
-  Z_mm, u_m_s, v_m_s, w_m_s, ax_m_s2, ay_m_s2, az_m_s2``.
+- ``truth_tracks.csv``: ``track_id, frame, time, X_mm, Y_mm, Z_mm, u, v, w, ax, ay, az``
+  (velocity in m per field time unit, acceleration in m per field time unit squared);
+  ``truth_tracks.h5``: the same as ``(id, frame, axis)`` datasets ``position_mm``,
+  ``velocity``, ``acceleration`` with named dimensions and ``units`` (``m/T0``: metres per
+  field time unit), and ``time (frame)``.
 """
 
 import json
@@ -35,10 +44,14 @@ import numpy as np
 
 from rimcl.core.atomic import atomic_path
 from rimcl.core.provenance import stamp_h5, to_json
+from rimcl.core.tables_h5 import TRACER_DIMENSIONS, add_scale, write_variable
 from rimcl.stats.tables import write_json
 
 SCHEMA = "lpt_case"
-SCHEMA_VERSION = 1
+#: 2: named (id, frame) dimensions, tracks stored (N, F) (1: (F, N) without dimensions)
+SCHEMA_VERSION = 2
+#: The two axes of a pixel position.
+PIXEL_AXES = ["column", "row"]
 #: Field axes of the LPT challenge's X, Y, Z (X along x2, Y along x3, Z = depth x1).
 XYZ_AXES = (1, 2, 0)
 
@@ -66,39 +79,65 @@ def write_case(path, run, result, scene, overwrite=True):
         h5.attrs["length_m"] = run.length_m
         h5.attrs["units"] = json.dumps(_units(run))
         stamp_h5(h5, {**describe(scene), "study_scene": scene.study})
-        tracks = h5.create_group("tracks")
-        tracks["time"] = run.times
-        tracks["tracer_id"] = np.arange(run.true.shape[1])
-        tracks["flags"] = result["flags"]
+        frames, count = run.true.shape[:2]
+
+        def tracer_group(name, pixel_axis=False):
+            group = h5.require_group(name)
+            add_scale(group, "id", np.arange(count))
+            add_scale(group, "frame", np.arange(frames))
+            if pixel_axis:
+                add_scale(group, "pixel_axis", PIXEL_AXES)
+            return group
+
+        def per_tracer(group, name, values, units):
+            """Per frame and tracer ``(F, N, ...)`` values written as ``(id, frame, ...)``."""
+            values = np.swapaxes(np.asarray(values), 0, 1)
+            dimensions = (*TRACER_DIMENSIONS, "pixel_axis")[: values.ndim]
+            dataset = write_variable(group, name, values, dimensions, units)
+            if units == "L0":
+                dataset.attrs["si_per_unit"] = run.length_m
+
+        tracks = tracer_group("tracks")
+        write_variable(tracks, "time", run.times, ("frame",), "T0")
+        write_variable(tracks, "flags", result["flags"], ("id",), "1")
         for axis in range(3):
-            tracks[f"x{axis + 1}_true"] = run.true[..., axis]
-            tracks[f"x{axis + 1}_meas"] = result["x_meas"][..., axis]
-            tracks[f"x{axis + 1}_ref"] = result["x_ref"][..., axis]
-            tracks[f"x{axis + 1}_opt_meas"] = result["x_opt_meas"][..., axis]
-            tracks[f"x{axis + 1}_opt_ref"] = result["x_opt_ref"][..., axis]
-            if "x_vsc" in result:
-                tracks[f"x{axis + 1}_vsc"] = result["x_vsc"][..., axis]
-            tracks[f"u{axis + 1}_true"] = run.u_true[..., axis]
-            tracks[f"a{axis + 1}_true"] = run.a_true[..., axis]
-        cameras = h5.create_group("cameras")
+            columns = {
+                f"x{axis + 1}_true": (run.true, "L0"),
+                f"x{axis + 1}_meas": (result["x_meas"], "L0"),
+                f"x{axis + 1}_ref": (result["x_ref"], "L0"),
+                f"x{axis + 1}_opt_meas": (result["x_opt_meas"], "L0"),
+                f"x{axis + 1}_opt_ref": (result["x_opt_ref"], "L0"),
+                f"x{axis + 1}_vsc": (result.get("x_vsc"), "L0"),
+                f"u{axis + 1}_true": (run.u_true, "L0/T0"),
+                f"a{axis + 1}_true": (run.a_true, "L0/T0^2"),
+            }
+            for name, (values, units) in columns.items():
+                if values is not None:
+                    per_tracer(tracks, name, values[..., axis], units)
         for c, camera in enumerate(result["cameras"]):
-            group = cameras.create_group(camera.name)
+            group = tracer_group(f"cameras/{camera.name}", pixel_axis=True)
             for kind in ("meas", "ref"):
-                group[f"centroid_{kind}"] = result[f"centroid_{kind}"][:, c]
-                group[f"optics_{kind}"] = result[f"optics_{kind}"][:, c]
-                group[f"image_flags_{kind}"] = result[f"image_flags_{kind}"][:, c]
-                group[f"peak_{kind}"] = result[f"peak_{kind}"][:, c]
-                group[f"disparity_{kind}"] = result[f"disparity_{kind}"][..., c]
-                group[f"disparity_opt_{kind}"] = result[f"disparity_opt_{kind}"][..., c]
+                per_tracer(group, f"centroid_{kind}", result[f"centroid_{kind}"][:, c], "px")
+                per_tracer(group, f"optics_{kind}", result[f"optics_{kind}"][:, c], "px")
+                per_tracer(group, f"image_flags_{kind}", result[f"image_flags_{kind}"][:, c], "1")
+                per_tracer(group, f"peak_{kind}", result[f"peak_{kind}"][:, c], "1")
+                per_tracer(group, f"disparity_{kind}", result[f"disparity_{kind}"][..., c], "px")
+                disparity = result[f"disparity_opt_{kind}"][..., c]
+                per_tracer(group, f"disparity_opt_{kind}", disparity, "px")
             if "disparity_vsc" in result:
-                group["disparity_vsc"] = result["disparity_vsc"][..., c]
-            group["failed_rays"] = result["failed_rays"][:, c]
+                per_tracer(group, "disparity_vsc", result["disparity_vsc"][..., c], "px")
+            per_tracer(group, "failed_rays", result["failed_rays"][:, c], "1")
             group.attrs["parameters"] = to_json(camera.describe())
             group.attrs["calibration"] = to_json(result["calibration"][c])
             group.attrs["rays"] = to_json(result["rays"][c])
         calibration = h5.create_group("calibration")
-        calibration["target"] = result["target"]
-        calibration["pixels"] = result["target_pixels"]
+        add_scale(calibration, "point", np.arange(len(result["target"])))
+        add_scale(calibration, "axis", ["x1", "x2", "x3"])
+        add_scale(calibration, "camera", [camera.name for camera in result["cameras"]])
+        add_scale(calibration, "pixel_axis", PIXEL_AXES)
+        write_variable(calibration, "target", result["target"], ("point", "axis"), "L0")
+        pixels = result["target_pixels"]
+        write_variable(calibration, "pixels", pixels, ("camera", "point", "pixel_axis"), "px")
         h5.attrs["exposure"] = to_json(result["exposure"])
         h5.attrs["sensor"] = to_json(result["sensor"])
         h5.attrs["mie"] = to_json(result["mie"])
@@ -210,7 +249,15 @@ def write_truth_tracks(folder, run, overwrite=True):
                 "time": "field time units",
             }
         )
-        h5["time"] = run.times
-        h5["position_mm"] = position
-        h5["velocity"] = velocity
-        h5["acceleration"] = acceleration
+        # named dimensions (id, frame, axis), for xarray.open_dataset(path)
+        add_scale(h5, "id", np.arange(count))
+        add_scale(h5, "frame", np.arange(frames))
+        add_scale(h5, "axis", ["X", "Y", "Z"])
+        write_variable(h5, "time", run.times, ("frame",), "T0")
+        dimensions = (*TRACER_DIMENSIONS, "axis")
+        for name, values, units in (
+            ("position_mm", position, "mm"),
+            ("velocity", velocity, "m/T0"),
+            ("acceleration", acceleration, "m/T0^2"),
+        ):
+            write_variable(h5, name, np.swapaxes(values, 0, 1), dimensions, units)

@@ -15,12 +15,24 @@ from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError, first_line
 from rimcl.core.memory import check_array_memory
 from rimcl.core.provenance import stamp_h5, to_json
+from rimcl.core.tables_h5 import add_scale, write_variable
 from rimcl.fields.field import AnalyticField
 from rimcl.optics.camera import PlaneCamera, Scene, seed_tracers
 from rimcl.optics.trace import STATUS_NAMES
 
 TRACE_SCHEMA = "trace"
 TRACE_SCHEMA_VERSION = 1
+#: Units of the trace file's columns (the rest are dimensionless): ``L0`` the field length unit.
+TRACE_UNITS = {
+    "origin": "L0",
+    "image_pos": "L0",
+    "end_pos": "L0",
+    "deflection": "rad",
+    "deflection_angles": "rad",
+    "path_length": "L0",
+    "optical_path": "L0",
+    "n_metric": "1/L0",
+}
 
 
 def analytic_scene(length):
@@ -171,6 +183,13 @@ def write_trace(path, result, config, device=None, tracer_id=None, overwrite=Fal
         out.attrs["status_names"] = to_json(list(STATUS_NAMES))
         out.attrs["status_counts"] = to_json(result.counts)
         stamp_h5(out, {**config, "trace": result.config}, device)
+        # named dimensions (ray, axis) and units, for xarray.open_dataset(path, group="rays")
         rays = out.create_group("rays")
+        add_scale(rays, "ray", np.arange(len(result.status)))
+        add_scale(rays, "axis", ["x1", "x2", "x3"])
         for name, values in columns.items():
-            rays.create_dataset(name, data=values, compression="gzip", shuffle=True)
+            dimensions = ("ray", "axis")[: np.ndim(values)]
+            write_variable(
+                rays, name, values, dimensions, TRACE_UNITS.get(name, "1"),
+                compression="gzip", shuffle=True,
+            )  # fmt: skip

@@ -38,10 +38,11 @@ pixel ``(row i, column j)`` at ``(x, y) = (j, i)``, covering ``[j - 1/2, j + 1/2
 towards higher row indices (down the image). A vector is the displacement of image B
 relative to image A at its window centre.
 
-Output file (``rimcl_schema = "piv"``, ``schema_version = 1``), :func:`write_piv`:
+Output file (``rimcl_schema = "piv"``, ``schema_version = 2``), :func:`write_piv`:
 datasets ``x, y, dx, dy, peak_ratio`` (float64) and ``valid, replaced`` (bool), all of
-shape ``(rows, columns)`` of the vector grid; root attributes ``settings``, ``config``,
-``versions`` (JSON), ``image_shape``, ``coordinates``.
+shape ``(rows, columns)`` of the vector grid, with named dimensions ``row`` and ``column``
+(the window centres' ``y`` and ``x``, px) and ``units``, for ``xarray.open_dataset``; root
+attributes ``settings``, ``config``, ``versions`` (JSON), ``image_shape``, ``coordinates``.
 """
 
 import dataclasses
@@ -63,6 +64,7 @@ from scipy.ndimage import (
 from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import stamp_h5, to_json, versions
+from rimcl.core.tables_h5 import label_grid
 from rimcl.piv.validity import (
     noise_sigma,
     normalized_median_test,
@@ -585,6 +587,16 @@ def analyze_pair(image_a, image_b, settings=None):
     )
 
 
+def vector_unit(name):
+    """Units of a dataset of a PIV vector grid, from its name: positions and displacements
+    in pixels, ``*_ms`` in m/s, the rest dimensionless."""
+    if name.endswith("_ms"):
+        return "m/s"
+    if name in ("x", "y", "dx", "dy", "row", "column") or name.startswith(("dx_", "dy_")):
+        return "px"
+    return "1"
+
+
 def write_piv(path, result, config=None, overwrite=True):
     """Write a :class:`PivResult` to HDF5 (module docstring), atomically.
 
@@ -606,8 +618,9 @@ def write_piv(path, result, config=None, overwrite=True):
             h5.create_dataset(name, data=np.asarray(getattr(result, name), dtype=np.float64))
         for name in ("valid", "replaced"):
             h5.create_dataset(name, data=np.asarray(getattr(result, name), dtype=bool))
-        h5["x"].attrs["units"] = h5["y"].attrs["units"] = "px"
-        h5["dx"].attrs["units"] = h5["dy"].attrs["units"] = "px"
+        # named dimensions (row along the image rows, column along the columns; window
+        # centres in pixels) and units, for xarray.open_dataset(path)
+        label_grid(h5, np.asarray(result.y)[:, 0], np.asarray(result.x)[0, :], vector_unit)
         stamp_h5(h5, {"piv": result.settings.describe(), **(config or {})})
 
 

@@ -11,7 +11,8 @@ and ``<name>.json`` (every number drawn, with configuration and versions), as
   PIV baseline (pixels, one logarithmic colour scale per row);
 - ``piv_error_pdfs``: PDFs of the relative refraction errors of ``u3``, ``u2`` and ``|u|``
   per case, their systematic and random parts against ``G``, and the rms errors in pixels
-  (refraction, optics, baseline) against ``G``.
+  (refraction, optics, baseline) against ``G``, with a second axis in mm/s where the field's
+  scales are known (the other figures then say a pixel's µm and mm/s in their titles).
 
 Input per case: the per-vector table and statistics of :mod:`rimcl.piv.study`
 (``(case.vectors, case.stats)`` or :func:`rimcl.piv.study.load_piv_case`).
@@ -31,6 +32,7 @@ from rimcl.stats.figures_common import (
     finish_axes,
     new_figure,
     pdf_series,
+    physical_axis,
     relative_errors,
     save_figure,
 )
@@ -42,6 +44,25 @@ MAX_ARROWS = 40
 
 def _pixel_size(stats):
     return stats["pixel_size_over_L"] * stats["length_L"]
+
+
+def _per_px(stats):
+    """``(µm, mm/s)`` of one pixel on the sheet and of one pixel of displacement in Δt,
+    where the case records the field's scales (each None without the scale it needs)."""
+    length_m, time_s = stats.get("length_m"), stats.get("time_s")
+    if length_m is None:
+        return None, None
+    um = _pixel_size(stats) * length_m * 1e6
+    return um, None if time_s is None else um * 1e-3 / (stats["dt"] * time_s)
+
+
+def _scale_note(stats):
+    """The suptitle's note of a pixel's size and speed, or '' without the scales."""
+    um, mm_s = _per_px(stats)
+    if um is None:
+        return ""
+    speed = "" if mm_s is None else f", 1 px per Δt = {mm_s:.3g} mm/s"
+    return f"\n1 px = {um:.3g} µm on the sheet{speed}"
 
 
 def _tables(cases):
@@ -153,7 +174,7 @@ def _vectors(cases):
         }
     figure.suptitle(
         f"PIV vectors, {case_label(stats)} (arrows: the longest true vector spans one "
-        "window spacing)"
+        "window spacing)" + _scale_note(stats)
     )
     return figure, {"panels": panels}
 
@@ -201,7 +222,10 @@ def _error_maps(cases):
             panels[f"{part} {stats['name']}"] = {"magnitude_px": _listed(values)}
         if mesh is not None:  # one colour scale per row
             figure.colorbar(mesh, ax=axes[row, :].tolist(), label=label)
-    figure.suptitle("Per-vector errors (px): refraction, its optics part, and the PIV baseline")
+    figure.suptitle(
+        "Per-vector errors (px): refraction, its optics part, and the PIV baseline"
+        + _scale_note(cases[0][1])
+    )
     return figure, {"panels": panels}
 
 
@@ -254,6 +278,9 @@ def _error_pdfs(cases):
         ax.plot(g_values, [np.nan if v is None else v for v in values], style, label=label)
         parts[key] = values
     _log_against_g(ax, "rms per-vector error (px)", "displacement errors in pixels")
+    # the same in mm/s where the field's scales are known (every case one pixel and Δt)
+    mm_s = _per_px(stats[0])[1] if stats else None
+    physical_axis(ax, "y", mm_s, "rms per-vector error (mm/s)")
     ax.legend(fontsize=7)
     _letter(ax, "f")
     panels["f"] = {"G": g_values, **parts}

@@ -98,6 +98,9 @@ class PivConfig:
         a field with only the sheet velocity keeps the sheet on its stored plane.
     seed : int
         Seeds the tracers; the same seed gives the same tracers in every case.
+    time_s : float, optional
+        Seconds per field time unit, where known (``field.time_s``): with the camera's
+        ``length_m`` the outputs give the displacements in m/s too.
     """
 
     # PivImaging is frozen, so one shared default instance is safe
@@ -109,6 +112,7 @@ class PivConfig:
     x_sheet: float = None
     depth: float = None
     seed: int = 0
+    time_s: float = None
 
     def describe(self):
         return {
@@ -203,6 +207,15 @@ class PivRender:
     def pixel_size(self):
         """Length units per pixel."""
         return self.renderer.pixel_size
+
+    @property
+    def m_s_per_px(self):
+        """Metres per second of one pixel of displacement between the exposures, where the
+        field's scales are known (``length_m`` and ``time_s`` of :attr:`config`), else None."""
+        length_m, time_s = self.config.get("length_m"), self.config.get("time_s")
+        if length_m is None or time_s is None:
+            return None
+        return self.pixel_size * float(length_m) / (self.dt * float(time_s))
 
 
 def _exposure_times(source, start_frame, dt):
@@ -480,6 +493,9 @@ def run_piv_render(
         "velocity_frames": frames,
         "n_tracers": int(reference.positions.shape[1]),
         "rays_per_batch": int(run.rays_per_batch),
+        # metres per field length unit and seconds per field time unit, where known
+        "length_m": camera_config.length_m,
+        "time_s": piv.time_s,
         "image_rows": "row 0 at the top (highest x3), rows along -x3, columns along x2; "
         "pixel centres at integer coordinates",
     }

@@ -15,12 +15,14 @@ time scale (seconds per field time unit) also in m/s. Pixels as every PIV output
 ``(row i, column j)`` centred at ``(x, y) = (j, i)``, ``dy > 0`` down the frame.
 
 Files (:func:`write_piv_sequence`): per seed ``PREFIX_seed<s>_<k>.tif`` (``k`` from 000) and
-``PREFIX_seed<s>_truth.h5`` (``rimcl_schema = "piv_sequence_truth"``): ``times`` (field
-time units), ``truth/dx``, ``truth/dy`` (``(frames - 1, rows, columns)``, px per frame),
-``truth/u_ms``, ``truth/v_ms`` (with both scales), ``particles/position``
-(``(frames, N, 3)``, field length units), ``particles/col``, ``particles/row`` (pixels),
-``particles/intensity`` (sheet intensity), ``particles/image_point`` (mean image point of the
-collected rays, ``(x2, x3)``), ``particles/rays_collected``; root attributes ``units``,
+``PREFIX_seed<s>_truth.h5`` (``rimcl_schema = "piv_sequence_truth"``, ``schema_version =
+2``), every dataset with named dimensions and ``units`` for ``xarray.open_dataset``:
+``times (frame)`` (field time units), ``truth/dx``, ``truth/dy`` (``(step, row, column)``,
+``frames - 1`` steps, px per frame), ``truth/u_ms``, ``truth/v_ms`` (with both scales, m/s),
+``particles/position`` (``(id, frame, axis)``, field length units), ``particles/col``,
+``particles/row`` (``(id, frame)``, pixels), ``particles/intensity`` (sheet intensity),
+``particles/image_point`` (mean image point of the collected rays, ``(id, frame,
+image_axis)``, ``x2, x3``), ``particles/rays_collected``; root attributes ``units``,
 ``config``, ``versions``.
 """
 
@@ -34,9 +36,10 @@ import numpy as np
 from rimcl.core.atomic import atomic_path, check_output
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import stamp_h5
+from rimcl.core.tables_h5 import TRACER_DIMENSIONS, add_scale, write_variable
 from rimcl.fields.crop import CroppedSource
 from rimcl.imaging.sensor import MEASURED_PASS
-from rimcl.piv.analysis import write_tiff
+from rimcl.piv.analysis import vector_unit, write_tiff
 from rimcl.piv.frame_pair import PivFrames, image_frames
 from rimcl.piv.imaging_config import (
     frame_pixels,
@@ -288,26 +291,45 @@ def write_piv_sequence(prefix, sequence, overwrite=True):
         write_tiff(path, image, sequence.config, overwrite)
     with atomic_path(truth, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
         h5.attrs["rimcl_schema"] = SEQUENCE_SCHEMA
-        h5.attrs["schema_version"] = 1
+        h5.attrs["schema_version"] = 2  # 2: (id, frame) particles, named dimensions
         h5.attrs["units"] = (
             "times in field time units; positions in field length units; col, row, dx, dy "
             "in pixels (dx, dy per frame); u_ms, v_ms in m/s; x along image columns, y "
             "along image rows"
         )
-        h5["times"] = sequence.times
+        # named dimensions and units on every dataset, for xarray.open_dataset(path, group=...)
+        frames = len(sequence.times)
+        add_scale(h5, "frame", np.arange(frames))
+        write_variable(h5, "times", sequence.times, ("frame",), "T0")
         group = h5.create_group("truth")
-        group["dx"], group["dy"] = sequence.truth_px[..., 0], sequence.truth_px[..., 1]
+        steps, rows, columns = sequence.truth_px.shape[:3]
+        add_scale(group, "step", np.arange(steps))  # exposure k to k + 1
+        add_scale(group, "row", np.arange(rows), "px")
+        add_scale(group, "column", np.arange(columns), "px")
+        dense = {"dx": sequence.truth_px[..., 0], "dy": sequence.truth_px[..., 1]}
         if sequence.truth_ms is not None:
-            group["u_ms"], group["v_ms"] = sequence.truth_ms[..., 0], sequence.truth_ms[..., 1]
+            dense.update(u_ms=sequence.truth_ms[..., 0], v_ms=sequence.truth_ms[..., 1])
+        for name, values in dense.items():
+            write_variable(group, name, values, ("step", "row", "column"), vector_unit(name))
         group.attrs["definition"] = (
             "displacement from exposure k to k + 1 of a fluid particle starting at each "
             "pixel centre on the sheet at exposure k"
         )
         particles = h5.create_group("particles")
-        particles["position"] = sequence.positions
-        particles["col"], particles["row"] = sequence.pixels[..., 0], sequence.pixels[..., 1]
-        particles["intensity"] = sequence.intensity
-        particles["image_point"] = sequence.frames.optics
-        particles["rays_collected"] = sequence.frames.collected
+        add_scale(particles, "id", np.arange(sequence.positions.shape[1]))
+        add_scale(particles, "frame", np.arange(frames))
+        add_scale(particles, "axis", ["x1", "x2", "x3"])
+        add_scale(particles, "image_axis", ["x2", "x3"])
+        columns = {
+            "position": (sequence.positions, "axis", "L0"),
+            "col": (sequence.pixels[..., 0], None, "px"),
+            "row": (sequence.pixels[..., 1], None, "px"),
+            "intensity": (sequence.intensity, None, "1"),
+            "image_point": (sequence.frames.optics, "image_axis", "L0"),
+            "rays_collected": (sequence.frames.collected, None, "1"),
+        }
+        for name, (values, last, units) in columns.items():
+            dimensions = (*TRACER_DIMENSIONS, last) if last else TRACER_DIMENSIONS
+            write_variable(particles, name, np.swapaxes(values, 0, 1), dimensions, units)
         stamp_h5(h5, sequence.config, sequence.device)
     return [*tiffs, truth]

@@ -34,7 +34,13 @@ from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import stamp_h5, to_json
 from rimcl.core.tables_h5 import label_grid
-from rimcl.piv.analysis import PivSettings, WindowGrid, analyze_pair, check_piv_memory
+from rimcl.piv.analysis import (
+    PivSettings,
+    WindowGrid,
+    analyze_pair,
+    check_piv_memory,
+    vector_unit,
+)
 from rimcl.piv.imaging_config import IMAGE_AXES, PivImaging, frame_pixels
 from rimcl.piv.render import PivConfig, run_piv_render
 from rimcl.piv.truth import window_means
@@ -284,7 +290,8 @@ def case_statistics(render, vectors, settings):
     Returns
     -------
     dict
-        ``name, G, delta_n_max, length_L, pixel_size_over_L, dt, motion`` (the motion
+        ``name, G, delta_n_max, length_L, pixel_size_over_L, dt``, ``length_m`` and
+        ``time_s`` (the field's scales, None where unknown), ``motion`` (the motion
         model, :data:`rimcl.piv.tracer_motion.MOTION_SHEET` or ``MOTION_3D``), ``n_tracers,
         n_vectors, n_used, n_excluded`` (by reason), ``velocity`` (refraction error ``u' - u^ref``:
         ``u2, u3, magnitude`` error summaries and ``angle_deg_median``), ``optics`` (the
@@ -318,6 +325,9 @@ def case_statistics(render, vectors, settings):
         "length_L": length,
         "pixel_size_over_L": render.pixel_size / length,
         "dt": render.dt,
+        # metres per field length unit and seconds per field time unit, None where unknown
+        "length_m": render.config.get("length_m"),
+        "time_s": render.config.get("time_s"),
         "motion": render.motion,
         "n_tracers": int(render.reference.positions.shape[1]),
         "n_vectors": int(used.size),
@@ -429,9 +439,11 @@ def run_piv_case(
 def write_piv_case(path, case, overwrite=True, record=None):
     """Write one case's per-vector table and statistics to HDF5 (``rimcl_schema = "piv_case"``).
 
-    Datasets: :data:`VECTOR_COLUMNS` (pixels; ``x`` along ``x2``, ``y`` along ``x3``). Root
+    Datasets: :data:`VECTOR_COLUMNS` (pixels; ``x`` along ``x2``, ``y`` along ``x3``), and
+    where the field's scales are known ``u_true_ms``, ``v_true_ms`` (the truth in m/s). Root
     attributes: ``case``, ``k_rho``, ``dt``, ``pixel_size``, ``motion``, ``stats`` (JSON),
-    ``config``, ``versions``, and with ``record`` (a study's scene) ``study_scene`` (JSON).
+    ``config``, ``versions``, ``length_m``, ``time_s`` and ``m_s_per_px`` where known, and
+    with ``record`` (a study's scene) ``study_scene`` (JSON).
     """
     with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
         h5.attrs["rimcl_schema"] = SCHEMA
@@ -446,16 +458,20 @@ def write_piv_case(path, case, overwrite=True, record=None):
             h5.attrs[STUDY_RECORD] = to_json(record)
         for name in VECTOR_COLUMNS:
             h5.create_dataset(name, data=case.vectors[name])
+        # the field's scales, where known: the truth in m/s too (u along x2, v down the rows)
+        m_s_per_px = case.render.m_s_per_px
+        for name in ("length_m", "time_s"):
+            if case.render.config.get(name) is not None:
+                h5.attrs[name] = float(case.render.config[name])
+        if m_s_per_px is not None:
+            h5.attrs["m_s_per_px"] = m_s_per_px
+            h5.create_dataset("u_true_ms", data=case.vectors["dx_true"] * m_s_per_px)
+            h5.create_dataset("v_true_ms", data=case.vectors["dy_true"] * m_s_per_px)
         # named dimensions (row along x3, column along x2; window centres in pixels) and
         # units, for xarray.open_dataset(path)
         x, y = np.asarray(case.vectors["x"]), np.asarray(case.vectors["y"])
-        label_grid(h5, y[:, 0], x[0, :], _vector_unit)
+        label_grid(h5, y[:, 0], x[0, :], vector_unit)
         stamp_h5(h5, case.render.config, case.render.device)
-
-
-def _vector_unit(name):
-    """Units of a PIV case file's column: positions and displacements in pixels."""
-    return "px" if name in ("x", "y", "row", "column") or name.startswith(("dx_", "dy_")) else "1"
 
 
 def load_piv_case(path):
@@ -560,6 +576,7 @@ def configs_from_study(study):
         x_sheet=shared.x_sheet,
         depth=shared.depth,
         seed=shared.tracers.seed,
+        time_s=shared.time.time_s,
     )
     # the windows must fit the frames, and the analysis the memory, before a study writes
     check_piv_memory((piv.imaging.pixels,) * 2, piv.settings, "the study's PIV")

@@ -6,11 +6,13 @@ each interrogation window (:func:`true_displacement`).
 Files (:func:`write_piv_render`, of a
 :class:`rimcl.piv.render.PivRender`): ``<prefix>_field_A.tif``, ``<prefix>_field_B.tif``,
 ``<prefix>_uniform_A.tif``, ``<prefix>_uniform_B.tif`` (16-bit TIFF) and
-``<prefix>_truth.h5`` (``rimcl_schema = "piv_truth"``): per tracer, positions at both
-exposures (``x1, x2, x3``, length units, and ``col, row``, pixels), sheet intensities and
-the light-weighted mean image points of its collected rays per medium; the true
-displacement averaged over each interrogation window of the final PIV grid; the motion
-model (root attribute ``motion``), the configuration and versions.
+``<prefix>_truth.h5`` (``rimcl_schema = "piv_truth"``, ``schema_version = 2``): per tracer
+and exposure (``(id, frame)`` datasets, ``frame`` A and B), positions (``x1, x2, x3``, length
+units, and ``col, row``, pixels), sheet intensities and the light-weighted mean image points
+of its collected rays per medium; the true displacement averaged over each interrogation
+window of the final PIV grid (``(row, column)``, px; in m/s too where the field's scales are
+known); the motion model (root attribute ``motion``), the scales, the configuration and
+versions. Every dataset has named dimensions and ``units``, for ``xarray.open_dataset``.
 """
 
 import math
@@ -21,11 +23,13 @@ import numpy as np
 
 from rimcl.core.atomic import atomic_paths, check_output
 from rimcl.core.provenance import stamp_h5
-from rimcl.piv.analysis import write_tiff
+from rimcl.core.tables_h5 import TRACER_DIMENSIONS, add_scale, label_grid, write_variable
+from rimcl.piv.analysis import vector_unit, write_tiff
 from rimcl.piv.imaging_config import frame_pixels, sheet_intensity
 
 TRUTH_SCHEMA = "piv_truth"
-TRUTH_SCHEMA_VERSION = 1
+#: 2: particles as (id, frame) datasets, named dimensions and units (1: a dataset per exposure)
+TRUTH_SCHEMA_VERSION = 2
 MEDIA = ("field", "uniform")
 
 
@@ -208,24 +212,44 @@ def _write_set(paths, result):
             "integer coordinates (pixel (row i, column j) centred at col = j, row = i); "
             "truth dx along columns, dy along rows (dy > 0: down the frame, towards lower x3)"
         )
+        m_s_per_px = result.m_s_per_px
+        for name in ("length_m", "time_s"):
+            if result.config.get(name) is not None:
+                h5.attrs[name] = float(result.config[name])
+        if m_s_per_px is not None:
+            h5.attrs["m_s_per_px"] = m_s_per_px
+        # per tracer and exposure: (id, frame[, axis]) datasets with named dimensions
         particles = h5.create_group("particles")
-        for index, frame in enumerate("AB"):
-            particles[f"position_{frame}"] = reference.positions[index]
-            particles[f"col_{frame}"] = pixels[index, :, 0]
-            particles[f"row_{frame}"] = pixels[index, :, 1]
-            particles[f"intensity_{frame}"] = sheet_intensity(
-                reference.positions[index, :, 0], result.scene.x_sheet, thickness
-            )
-            for medium, pair in frames.items():
-                particles[f"image_point_{medium}_{frame}"] = pair.optics[index]
-                particles[f"rays_collected_{medium}_{frame}"] = pair.collected[index]
+        add_scale(particles, "id", np.arange(reference.positions.shape[1]))
+        add_scale(particles, "frame", ["A", "B"])
+        add_scale(particles, "axis", ["x1", "x2", "x3"])
+        add_scale(particles, "image_axis", ["x2", "x3"])
+        intensity = sheet_intensity(reference.positions[..., 0], result.scene.x_sheet, thickness)
+        columns = {
+            "position": (reference.positions, "axis", "L0"),
+            "col": (pixels[..., 0], None, "px"),
+            "row": (pixels[..., 1], None, "px"),
+            "intensity": (intensity, None, "1"),
+        }
+        for medium, pair in frames.items():
+            columns[f"image_point_{medium}"] = (pair.optics, "image_axis", "L0")
+            columns[f"rays_collected_{medium}"] = (pair.collected, None, "1")
+        for name, (values, last, units) in columns.items():
+            dimensions = (*TRACER_DIMENSIONS, last) if last else TRACER_DIMENSIONS
+            write_variable(particles, name, np.swapaxes(values, 0, 1), dimensions, units)
         truth = h5.create_group("truth")
         for name, values in reference.truth.items():
             truth[name] = values
+        if m_s_per_px is not None:  # along image columns and rows, as dx and dy
+            truth["u_ms"] = reference.truth["dx"] * m_s_per_px
+            truth["v_ms"] = reference.truth["dy"] * m_s_per_px
         truth.attrs["definition"] = (
             "true in-plane displacement B - A (px), weighted by I_A * I_B, averaged over the "
-            "tracers whose midpoint image position lies in the final interrogation window"
+            "tracers whose midpoint image position lies in the final interrogation window; "
+            "u_ms, v_ms: the same in m/s"
         )
+        x, y = reference.truth["x"], reference.truth["y"]
+        label_grid(truth, y[:, 0], x[0, :], vector_unit)
         for medium, pair in frames.items():
             group = h5.create_group(f"rays_{medium}")
             for name, value in pair.ray_counts.items():

@@ -10,8 +10,9 @@ The reference does not depend on the refractive-index case. :func:`run_render` r
 in :attr:`RenderResult.reference`; pass it to later calls with the same configuration
 (and seed) to skip recomputing it, as a study over cases does.
 
-Output file (``rimcl_schema = "render"``, ``schema_version = 1``), written by
-:func:`rimcl.ptv.render_file.write_render`; the README documents every dataset.
+Output file (``rimcl_schema = "render"``, ``schema_version = 2``), written by
+:func:`rimcl.ptv.render_file.write_render`; the docs' render file format page documents
+every dataset.
 """
 
 import json

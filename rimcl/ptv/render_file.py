@@ -3,7 +3,8 @@
 :class:`RenderResult` holds everything a run measured (and its reusable :class:`Reference`);
 :func:`merge_results` joins the results of tracer shards into the whole run's;
 :func:`write_render` writes the render file (``rimcl_schema = "render"``,
-``schema_version = 1``, every dataset documented in the README) and
+``schema_version = 2``: per-tracer tables as ``(id, frame)`` datasets; every dataset
+documented on the render file format page of the docs) and
 :func:`write_frame_image` the full first frame as a 16-bit PNG or TIFF.
 """
 
@@ -16,12 +17,13 @@ import numpy as np
 from rimcl.core.atomic import atomic_path, check_output
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import stamp_h5, to_json
-from rimcl.core.tables_h5 import label_table
+from rimcl.core.tables_h5 import label_table, write_tracer_table
 
 SCHEMA = "render"
 
 
-SCHEMA_VERSION = 1
+#: 2: per-tracer tables as (id, frame) datasets (1: one 1-D row per tracer and frame)
+SCHEMA_VERSION = 2
 
 
 @dataclasses.dataclass
@@ -212,11 +214,14 @@ def write_render(path, result, overwrite=False):
             if table is None:
                 continue
             group = h5.create_group(group_name)
-            for name, values in table.items():
-                group.create_dataset(name, data=values)
-            # named dimensions and units, for xarray.open_dataset(path, group=...)
-            index = {"rays": "ray", "tracers": None}.get(group_name, "id")
-            label_table(group, index)
+            # named dimensions and units, for xarray.open_dataset(path, group=...):
+            # (id, frame) for the per-tracer tables, ray for the rays
+            if group_name == "rays":
+                for name, values in table.items():
+                    group.create_dataset(name, data=values)
+                label_table(group, "ray")
+            else:
+                write_tracer_table(group, table)
             for dataset in group.values():
                 if si.get(dataset.attrs.get("units")) is not None:
                     dataset.attrs["si_per_unit"] = si[dataset.attrs["units"]]

@@ -94,14 +94,52 @@ def physical_axis(ax, which, factor, label):
     factor : float or None
         Physical units per plotted unit (e.g. µm per L).
     label : str
+
+    Returns
+    -------
+    matplotlib.axes.Axes or None
+        The second axis (None without ``factor``).
     """
     if factor is None:
-        return
+        return None
     functions = (lambda value: value * factor, lambda value: value / factor)
     if which == "x":
-        ax.secondary_xaxis("top", functions=functions).set_xlabel(label)
+        second = ax.secondary_xaxis("top", functions=functions)
+        second.set_xlabel(label)
     else:
-        ax.secondary_yaxis("right", functions=functions).set_ylabel(label)
+        second = ax.secondary_yaxis("right", functions=functions)
+        second.set_ylabel(label)
+    return second
+
+
+def physical_unit(kind, length_m=None, time_s=None):
+    """Physical units per field unit of a plotted quantity, and the unit's name.
+
+    Parameters
+    ----------
+    kind : {"position", "time", "velocity", "acceleration"}
+    length_m, time_s : float, optional
+        Metres per field length unit and seconds per field time unit.
+
+    Returns
+    -------
+    factor : float
+        Millimetres, milliseconds, mm/s or m/s² per field unit; 1 where a scale it needs
+        is unknown.
+    unit : str
+        ``mm``, ``ms``, ``mm/s``, ``m/s²``; or ``field length units``, ``field time units``,
+        ``field units`` without the scales.
+    """
+    has_time = length_m is not None and time_s is not None
+    if kind == "position":
+        return (length_m * 1e3, "mm") if length_m is not None else (1.0, "field length units")
+    if kind == "time":
+        return (time_s * 1e3, "ms") if time_s is not None else (1.0, "field time units")
+    if kind == "velocity":
+        return (length_m / time_s * 1e3, "mm/s") if has_time else (1.0, "field units")
+    if kind == "acceleration":
+        return (length_m / time_s**2, "m/s²") if has_time else (1.0, "field units")
+    raise ValueError(f"unknown kind {kind!r}")
 
 
 def figure_title(figure, text, fontsize=9):

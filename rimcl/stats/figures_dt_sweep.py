@@ -17,6 +17,8 @@ from rimcl.stats.figures_common import (
     figure_title,
     finish_axes,
     panel_title,
+    physical_axis,
+    physical_unit,
     save_figure,
     ticks_at,
 )
@@ -91,21 +93,41 @@ def dt_sweep_data(stats_by_dt):
     return {"dt": dts, "cases": cases, "quantities": [f"{g}.{c}" for g, c in quantities]}
 
 
+def _time_scale(stats_by_dt):
+    """Seconds per field time unit the studies record (``units.scales.time_s``), or None."""
+    for document in stats_by_dt.values():
+        for case in document.get("cases", []):
+            time_s = dig(case, "units", "scales", "time_s")
+            if time_s is not None:
+                return time_s
+    return None
+
+
 def draw_dt_sweep(stats_by_dt):
     """The Δt sweep figure: refraction (solid) and baseline (dashed) against Δt per case.
 
     Below the panels, one line per case lists the Δt at which refraction exceeds the
-    baseline, for each quantity.
+    baseline, for each quantity. Where the studies record the field's time scale, Δt is
+    given in milliseconds too (a second axis on top, and in the lines).
 
     Returns
     -------
     figure : matplotlib.figure.Figure
     data : dict
-        ``{"panels": dt_sweep_data(...)}``.
+        ``{"panels": dt_sweep_data(...)}``, with ``ms_per_time_unit`` (None without the
+        scale).
     """
     data = dt_sweep_data(stats_by_dt)
     quantities = data["quantities"]
     names = list(data["cases"])
+    # milliseconds where the studies record the field's time scale (every study one field)
+    time_s = _time_scale(stats_by_dt)
+    ms = None if time_s is None else physical_unit("time", time_s=time_s)[0]
+    data["ms_per_time_unit"] = ms
+
+    def shown(dt):
+        return f"{dt:.3g}" if ms is None else f"{dt:.3g} ({dt * ms:.3g} ms)"
+
     count = max(len(quantities), 1)
     cols = min(count, 2)
     rows = -(-count // cols)
@@ -115,7 +137,7 @@ def draw_dt_sweep(stats_by_dt):
         parts = []
         for quantity in quantities:
             dominated = data["cases"][name][quantity]["refraction_dominates_dt"]
-            listed = ", ".join(f"{dt:.3g}" for dt in dominated) if dominated else "none"
+            listed = ", ".join(shown(dt) for dt in dominated) if dominated else "none"
             parts.append(f"{quantity}: {listed}")
         line = f"{name}: refraction above baseline at Δt = " + "; ".join(parts)
         lines += textwrap.wrap(line, characters, subsequent_indent="    ")
@@ -159,6 +181,9 @@ def draw_dt_sweep(stats_by_dt):
         ticks_at(ax.xaxis, data["dt"])
         ax.set_xlabel("time step Δt (field time units)")
         ax.set_ylabel("rms(ε) / rms(truth)")
+        top = physical_axis(ax, "x", ms, "Δt (ms)")
+        if top is not None:  # ticks at the studies' Δt, as below
+            ticks_at(top.xaxis, [dt * ms for dt in data["dt"]])
         ax.grid(True, which="major", alpha=0.3)
         group, component = quantity.split(".")
         description = dict((g, d) for g, _, d in KINEMATIC_BLOCKS)[group]

@@ -17,6 +17,7 @@ from rimcl.stats.figures_common import (
     panel_title,
     pdf_series,
     physical_axis,
+    physical_unit,
     relative_errors,
     statistic_against_g,
 )
@@ -282,9 +283,13 @@ def draw_maps(all_tables, cases):
         )
     )
     letters = iter("abcdefgh")
+    # mm and mm/s, m/s² where the render files record the field's scales; else field units
+    scales = (all_tables[air].length_m, all_tables[air].time_s)
+    mm, length_unit = physical_unit("position", *scales)
     for row, (symbol, group) in enumerate((("u", "velocity"), ("a", acceleration))):
+        factor, unit = physical_unit("velocity" if symbol == "u" else "acceleration", *scales)
         truth = first_frame_rows(kinematic_rows(all_tables[air], group))
-        truth = truth.get(f"{symbol}3_true", np.zeros(0))
+        truth = factor * truth.get(f"{symbol}3_true", np.zeros(0))
         limit = float(np.percentile(np.abs(truth), 98)) if truth.size else 1.0
         columns = (
             ("truth", air, "true"),
@@ -295,10 +300,10 @@ def draw_maps(all_tables, cases):
         for col, (label, index, kind) in enumerate(columns):
             ax = axes[row, col]
             table = first_frame_rows(kinematic_rows(all_tables[index], group))
-            values = table.get(f"{symbol}3_{kind}", np.zeros(0))
+            values = factor * table.get(f"{symbol}3_{kind}", np.zeros(0))
             ids = table.get("id", np.zeros(0))
             frames = table.get("frame", np.full(len(ids), frame0))
-            xy = np.array(
+            xy = mm * np.array(
                 [
                     position.get((int(i), int(f)), (np.nan, np.nan))
                     for i, f in zip(ids, frames, strict=True)
@@ -308,13 +313,14 @@ def draw_maps(all_tables, cases):
                 mesh = ax.scatter(
                     xy[:, 0], xy[:, 1], c=values, s=9, cmap="RdBu_r", vmin=-limit, vmax=limit
                 )
-                figure.colorbar(mesh, ax=ax, label=f"{symbol}3 (field units)", extend="both")
+                figure.colorbar(mesh, ax=ax, label=f"{symbol}3 ({unit})", extend="both")
             ax.set_aspect("equal")
-            ax.set_xlabel("x2 (field length units)")
-            ax.set_ylabel("x3 (field length units)")
+            ax.set_xlabel(f"x2 ({length_unit})")
+            ax.set_ylabel(f"x3 ({length_unit})")
             method = " (fit)" if group.endswith("_fit") else ""
             panel_title(ax, next(letters), f"{symbol}3{method}: {label}", fontsize=8)
             panels[f"{symbol}3 {label}"] = {
+                "units": {"x2": length_unit, "x3": length_unit, "value": unit},
                 "id": table.get("id", np.zeros(0)).tolist(),
                 "x2": xy[:, 0].tolist() if xy.size else [],
                 "x3": xy[:, 1].tolist() if xy.size else [],

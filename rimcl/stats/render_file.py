@@ -13,10 +13,13 @@ from pathlib import Path
 import numpy as np
 
 from rimcl.core.errors import RimclError
+from rimcl.core.tables_h5 import read_table
 from rimcl.stats.tables import NOTE_COLUMN
 
 RENDER_SCHEMA = "render"
-RENDER_SCHEMA_VERSION = 1
+#: Versions this reader reads: 1 wrote each table as 1-D rows, 2 the per-tracer tables as
+#: (id, frame) datasets; both read into the same 1-D frame-major columns.
+READ_SCHEMA_VERSIONS = (1, 2)
 TRACER_COLUMNS = (
     "id",
     "frame",
@@ -159,17 +162,18 @@ def _flag_bits(raw, path):
 
 def _read_group(h5file, group, columns, path, optional=()):
     """Columns of one group; ``optional`` column sets are read when all of a set is there."""
-    missing = [name for name in columns if name not in h5file[group]]
+    present = set(h5file[group])
+    missing = [name for name in columns if name not in present]
     if missing:
         raise RimclError(f"{path}: group {group!r} lacks datasets {', '.join(missing)}")
     names = list(columns)
     for extra in (NOTE_COLUMN,), ("frame",), *optional:
-        present = [name for name in extra if name in h5file[group]]
-        if present and len(present) < len(extra):
+        held = [name for name in extra if name in present]
+        if held and len(held) < len(extra):
             absent = ", ".join(name for name in extra if name not in present)
-            raise RimclError(f"{path}: group {group!r} has {present[0]} but lacks {absent}")
-        names += [name for name in present if name not in names]
-    table = {name: np.asarray(h5file[group][name][()]) for name in names}
+            raise RimclError(f"{path}: group {group!r} has {held[0]} but lacks {absent}")
+        names += [name for name in held if name not in names]
+    table = read_table(h5file[group], names)
     lengths = {name: values.shape for name, values in table.items()}
     if len(set(lengths.values())) != 1 or any(len(shape) != 1 for shape in lengths.values()):
         raise RimclError(f"{path}: datasets of group {group!r} differ in shape: {lengths}")
@@ -208,10 +212,9 @@ def load_render(path):
         if schema != RENDER_SCHEMA:
             raise RimclError(f"{path}: not a rimcl render file (rimcl_schema = {schema!r})")
         version = int(attrs.get("schema_version", -1))
-        if version != RENDER_SCHEMA_VERSION:
-            raise RimclError(
-                f"{path}: render schema version {version}, this rimcl reads {RENDER_SCHEMA_VERSION}"
-            )
+        if version not in READ_SCHEMA_VERSIONS:
+            known = " and ".join(str(v) for v in READ_SCHEMA_VERSIONS)
+            raise RimclError(f"{path}: render schema version {version}, this rimcl reads {known}")
         missing = [key for key in ROOT_ATTRS if key not in attrs]
         if missing:
             raise RimclError(f"{path}: root attributes {', '.join(missing)} are missing")

@@ -47,7 +47,7 @@ from pathlib import Path
 
 from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
-from rimcl.core.tables_h5 import ROW_DIMENSION
+from rimcl.core.tables_h5 import read_table
 from rimcl.study.scheduler import _import_distributed, check_scheduler, parse_scheduler
 
 try:
@@ -167,8 +167,8 @@ def read_shard(path):
         def table(name):
             if name not in h5:
                 return None
-            # the row dimension write_render adds is no column: merged files get their own
-            return {k: v[()] for k, v in h5[name].items() if k != ROW_DIMENSION}
+            # 1-D frame-major columns, as the run made them: merged files get their own labels
+            return read_table(h5[name])
 
         return RenderResult(
             attrs={k: v for k, v in h5.attrs.items() if k not in provenance},

@@ -596,6 +596,13 @@ def piv_verdict(stats):
     return line
 
 
+def _px_and_mm_s(piv, key):
+    """An rms displacement of a PIV case in pixels, and in mm/s where the scales give it."""
+    text = number(piv["displacement_px"][key])
+    mm_s = ((piv.get("units") or {}).get(key) or {}).get("mm_s")
+    return text if mm_s is None else f"{text} ({number(mm_s)} mm/s)"
+
+
 def piv_lines(stats):
     """The PIV section of ``summary.md`` (no lines without PIV results): what was
     measured, the errors per case beside PTV's, and :func:`piv_verdict`."""
@@ -604,12 +611,18 @@ def piv_lines(stats):
         return []
     first = cases[0]["piv"]
     settings = first["piv"]
+    factors = (first.get("units") or {}).get("scales") or {}
+    pixel, dt = f"{first['pixel_size_over_L']:.3g} L", f"{first['dt']:.3g}"
+    if factors.get("pixel_um") is not None:
+        pixel += f" = {factors['pixel_um']:.3g} µm"
+    if factors.get("dt_ms") is not None:
+        dt += f" = {factors['dt_ms']:.3g} ms"
     lines = [
         "",
         "## PIV beside PTV",
         "",
         f"PIV frames of {first['n_tracers']} tracers across a Gaussian light sheet "
-        f"(pixel = {first['pixel_size_over_L']:.3g} L), Δt = {first['dt']:.3g}, "
+        f"(pixel = {pixel}), Δt = {dt}, "
         f"{settings['passes']} passes down to {settings['window']} px windows "
         f"(overlap {settings['overlap']:g}); cases in `piv/<case>.h5`, figures "
         f"`figures/piv_*`. Motion: {first['motion']}.",
@@ -620,7 +633,8 @@ def piv_lines(stats):
         "vector minus the window-averaged truth (the PIV method's own error). Relative "
         "errors with their bootstrap 95 % intervals (each vector one sample: overlapping "
         "windows share tracers, so the intervals are too narrow); `stats.json`: `piv` and "
-        "`piv_vs_ptv` per case.",
+        "`piv_vs_ptv` per case. Where the field's scales are known, each rms in pixels is "
+        "followed by the same in mm/s (`units` per case).",
         "",
     ]
     header = [
@@ -640,17 +654,16 @@ def piv_lines(stats):
     rows = []
     for case in cases:
         piv = case["piv"]
-        pixels = piv["displacement_px"]
         compared = case.get("piv_vs_ptv", {}).get("magnitude", {})
         rows.append(
             [
                 case["name"],
                 number(piv["G"]),
                 f"{piv['n_used']}/{piv['n_vectors']}",
-                number(pixels["truth_rms"]),
-                number(pixels["refraction_rms"]),
-                number(pixels["optics_rms"]),
-                number(pixels["baseline_rms"]),
+                *(
+                    _px_and_mm_s(piv, key)
+                    for key in ("truth_rms", "refraction_rms", "optics_rms", "baseline_rms")
+                ),
                 _percent_of(piv["velocity"]["u3"], "rms_normalized"),
                 _percent_of(piv["velocity"]["magnitude"], "rms_normalized"),
                 _percent_of(case["velocity"]["magnitude"], "rms_normalized")
