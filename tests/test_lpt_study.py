@@ -15,14 +15,6 @@ from rimcl.scene.keys import SCENE_KEYS
 from rimcl.scene.load import default_scene_text, load_scene
 
 
-@pytest.fixture(scope="module")
-def flow(tmp_path_factory):
-    from rimcl.fields.synth import synthesize, write_synth
-
-    result = synthesize(grid=16, seed=2, frames=5, frame_dt=0.04, t_start=0.5)
-    return write_synth(result, tmp_path_factory.mktemp("flow") / "flow16.h5")
-
-
 def test_scene_table_lists_the_lpt_keys_with_the_stage_defaults():
     text = default_scene_text()
     for section in ("[rig]", "[illumination]", "[lpt]"):
@@ -58,10 +50,10 @@ def test_unknown_and_bad_lpt_keys_are_refused(tmp_path):
         lpt_scene_from_study(load_scene(path))
 
 
-def test_study_runs_lpt(tmp_path, flow):
+def test_study_runs_lpt(tmp_path, lpt_flow):
     scene = tmp_path / "scene.toml"
     scene.write_text(
-        f'[field]\npath = "{flow}"\n[cases]\nnames = ["C1", "C3"]\n[tracers]\ncount = 20\n'
+        f'[field]\npath = "{lpt_flow}"\n[cases]\nnames = ["C1", "C3"]\n[tracers]\ncount = 20\n'
         '[time]\nframes = 5\n[run]\nmode = "lpt"\n'
         "[lpt]\ncalibration_grid = [6, 5]\nmax_rays = 4\nself_calibration_cells = [1, 2, 2]\n"
         "[illumination]\nextent = [0.5, 0.5]\n"

@@ -37,6 +37,7 @@ from rimcl.lpt.flow import BUILTIN_DT, Volume, builtin_flow, volume_velocity
 from rimcl.lpt.images import (
     PASSES,
     camera_imaging,
+    device_imager,
     locate_view,
     new_canvas,
     noiseless,
@@ -225,8 +226,9 @@ def _sensor_and_mie(scene, n_ref):
     return sensor, mie.build()
 
 
-def _choose_rays(field, cameras, imagings, exposure, sensor, mie, points, tracer, settings):
-    """Per camera, the ray count whose located centroid (noiseless sensor) has converged."""
+def _choose_rays(field, cameras, imagings, exposure, sensor, mie, points, tracer, settings, device):
+    """Per camera, the ray count whose located centroid (noiseless sensor) has converged
+    (imaged on ``device``, or by the NumPy engine without one)."""
     choices = []
     for c, camera in enumerate(cameras):
         quiet = dataclasses.replace(imagings[c], sensor=noiseless(sensor))
@@ -234,7 +236,10 @@ def _choose_rays(field, cameras, imagings, exposure, sensor, mie, points, tracer
         def located(seen, quiet=quiet, c=c):
             light = ray_light(seen, mie)
             key = (PASSES["meas"], 0, c)
-            return locate_view(quiet, seen, light, exposure.counts_per_light, key).centroid
+            imager = device_imager(quiet, light.shape[1], len(light), device)
+            return locate_view(
+                quiet, seen, light, exposure.counts_per_light, key, None, imager
+            ).centroid
 
         choices.append(
             choose_ray_count(
@@ -283,7 +288,14 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     target, fitted = calibrate_rig(cameras, run.volume, settings)
     models = [f[settings.model] for f in fitted]
     timings["calibration"] = time.perf_counter() - started
-    tracer = _tracer(scene, device)
+    # run.engine: tracer images on the device (its image kernel, which needs fp64; the
+    # rays are traced there too) or by the NumPy engine
+    imaging_device = None
+    if study["run"]["engine"] == "device":
+        from rimcl.core.device import select_device
+
+        imaging_device = select_device(device, need_fp64=True)
+    tracer = _tracer(scene, imaging_device or device)
     uniform = uniform_field(field0)
     sensor, mie = _sensor_and_mie(scene, field0.n_ref)
     started = time.perf_counter()
@@ -292,10 +304,13 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     imagings = [camera_imaging(camera, c, exposure, sensor) for c, camera in enumerate(cameras)]
     sample = run.true[0][:RAY_SAMPLE]
     choices = _choose_rays(
-        field0, cameras, imagings, exposure, sensor, mie, sample, tracer, settings
+        field0, cameras, imagings, exposure, sensor, mie, sample, tracer, settings, imaging_device
     )
-    timings["ray_choice"] = time.perf_counter() - started
     frames, count, ncam = run.true.shape[0], run.true.shape[1], len(cameras)
+    imagers = [
+        device_imager(imagings[c], choices[c]["rays"], count, imaging_device) for c in range(ncam)
+    ]
+    timings["ray_choice"] = time.perf_counter() - started
     kinds = ("meas", "ref")
     centroid = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
     optics = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
@@ -320,6 +335,7 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
                     exposure.scale,
                     (PASSES[kind], k, c),
                     canvas,
+                    imagers[c],
                 )
                 timings["views"] += middle - started
                 timings["images"] += time.perf_counter() - middle
