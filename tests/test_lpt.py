@@ -232,7 +232,7 @@ def test_soloff_beats_pinhole_through_the_window():
 def test_scene_keys_are_checked():
     with pytest.raises(RimclError, match="did you mean 'thickness'"):
         parse_lpt_scene({"illumination": {"thicknes": 1.0}})
-    with pytest.raises(RimclError, match=r"rig\.preset must be one of"):
+    with pytest.raises(RimclError, match=r"rig\.preset in the scene must be one of"):
         parse_lpt_scene({"rig": {"preset": "lpt-chalenge"}})
     with pytest.raises(RimclError, match="does not apply to LPT"):
         parse_lpt_scene({"camera": {"kind": "lens"}})
@@ -240,7 +240,7 @@ def test_scene_keys_are_checked():
         parse_lpt_scene({"rig": {"cameras": [{"look_at_mm": [1, 2, 3]}]}})
     scene = parse_lpt_scene({})
     assert scene.rig.preset == "lpt-challenge"
-    assert scene.study["cases"]["names"] == ["C1", "C2", "C3"]
+    assert scene.study.names == ["C1", "C2", "C3"]
 
 
 def test_soloff_terms_are_the_monomials():

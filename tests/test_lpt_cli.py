@@ -73,5 +73,5 @@ def test_bad_scene_is_one_line(tmp_path):
     scene.write_text('[rig]\npreset = "lpt"\n')
     result = CliRunner().invoke(cli, ["lpt", "run", str(scene), "-o", str(tmp_path / "o")])
     assert result.exit_code != 0
-    assert "rig.preset must be one of" in result.output
+    assert result.output.startswith("Error: rig.preset in") and "must be one of" in result.output
     assert "Traceback" not in result.output

@@ -172,9 +172,16 @@ def test_ray_count_choice_stops_at_the_first_converged_count():
 
 def _measured(scene, run, device, engine):
     """One case of ``scene`` on ``engine``: its result and every camera frame."""
+    import dataclasses
+
+    from rimcl.lpt.config import LptScene
     from rimcl.lpt.run import run_case
 
-    scene.study["run"]["engine"] = engine
+    study = scene.study
+    shared = dataclasses.replace(
+        study.shared, run=dataclasses.replace(study.shared.run, engine=engine)
+    )
+    scene = LptScene(dataclasses.replace(study, shared=shared))
     frames = {}
 
     def keep(case, kind, camera, frame, counts):

@@ -65,7 +65,7 @@ def write_case(path, run, result, scene, overwrite=True):
         h5.attrs["n_ref"] = result["n_ref"]
         h5.attrs["length_m"] = run.length_m
         h5.attrs["units"] = json.dumps(_units(run))
-        stamp_h5(h5, {**describe(scene), "study_scene": scene.study})
+        stamp_h5(h5, {**describe(scene), "study_scene": scene.study.scene_record()})
         tracks = h5.create_group("tracks")
         tracks["time"] = run.times
         tracks["tracer_id"] = np.arange(run.true.shape[1])
