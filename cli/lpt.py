@@ -10,8 +10,6 @@ def _run(scene_path, output, device, overwrite, dataset):
     from rimcl.lpt.run import run_lpt, summary_lines
 
     scene = load_lpt_scene(scene_path)
-    if device:
-        scene.study["run"]["device"] = device
 
     def progress(case, frame, frames):
         click.echo(f"{case}: frame {frame}/{frames}", err=True)
@@ -19,7 +17,7 @@ def _run(scene_path, output, device, overwrite, dataset):
     document = run_lpt(
         scene,
         output,
-        device=scene.study["run"]["device"] or None,
+        device=device or scene.measure.run.device,
         progress=progress,
         overwrite=overwrite,
         dataset=dataset,

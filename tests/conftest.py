@@ -57,3 +57,12 @@ def has_fp64(device):
     from rimcl.core.device import has_fp64
 
     return has_fp64(device)
+
+
+@pytest.fixture(scope="session")
+def lpt_flow(tmp_path_factory):
+    """A tiny flow with full velocity for LPT runs (16³, 5 frames 0.04 apart), made once."""
+    from rimcl.fields.synth import synthesize, write_synth
+
+    result = synthesize(grid=16, seed=2, frames=5, frame_dt=0.04, t_start=0.5)
+    return write_synth(result, tmp_path_factory.mktemp("flow") / "flow16.h5")

@@ -180,3 +180,32 @@ def test_describe_names_the_kind_and_the_derived_optics():
 def test_bad_lens_camera_rejected(kw, match):
     with pytest.raises(RimclError, match=match):
         _camera(**kw)
+
+
+def test_aiming_ends_early_with_the_bits_of_every_newton_step():
+    """aim_through_layers stops a ray's Newton steps once its iterate repeats (a fixed point
+    or a cycle in the last bits): the directions equal, bit for bit, those of all
+    NEWTON_STEPS steps run on every ray (the device's fan kernel runs them all)."""
+    from rimcl.optics.layers import NEWTON_STEPS, _newton_step, aim_through_layers
+
+    rng = np.random.default_rng(4)
+    count = 20000
+    lateral = rng.normal(0.0, 3.0, (count, 2))
+    lateral[:5] = 0.0  # straight on: reach 0
+    depths = np.column_stack([rng.uniform(0, 2, count), np.full(count, 0.1), np.full(count, 40.0)])
+    ratios = np.array([1.0, 1.333 / 1.52, 1.333])
+    reach = np.linalg.norm(lateral, axis=-1)
+    sine = np.minimum(reach / np.sum(depths * ratios, axis=-1), 0.999 / ratios.max())
+    history = [sine]
+    for _ in range(NEWTON_STEPS):
+        history.append(_newton_step(history[-1], reach, depths, ratios))
+    # rays still moving in the last bits: the early end must find the cycle's right phase
+    assert np.count_nonzero(history[-1] != history[-2]) > count // 10
+    unit = np.divide(lateral, reach[:, None], out=np.zeros_like(lateral), where=reach[:, None] > 0)
+    expected = np.column_stack([np.sqrt(1.0 - history[-1] ** 2), history[-1][:, None] * unit])
+    got = aim_through_layers(lateral, depths, ratios)
+    np.testing.assert_array_equal(got, expected)
+    # the same rays in a (K, P, 3) layout with shared depths, as a camera's aim gives them
+    shaped = aim_through_layers(lateral.reshape(100, 200, 2), depths[0], ratios)
+    single = aim_through_layers(lateral, depths[0], ratios)
+    np.testing.assert_array_equal(shaped.reshape(-1, 3), single)

@@ -9,18 +9,12 @@ from click.testing import CliRunner
 
 from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
-from rimcl.lpt.config import IlluminationConfig, LptSettings, RigConfig, lpt_scene_from_study
+from rimcl.lpt.config import CameraSpec, IlluminationConfig, LptSettings, RigConfig
 from rimcl.lpt.figures import FIGURE_NAMES
 from rimcl.scene.keys import SCENE_KEYS
+from rimcl.scene.keys_lpt import camera_keys
 from rimcl.scene.load import default_scene_text, load_scene
-
-
-@pytest.fixture(scope="module")
-def flow(tmp_path_factory):
-    from rimcl.fields.synth import synthesize, write_synth
-
-    result = synthesize(grid=16, seed=2, frames=5, frame_dt=0.04, t_start=0.5)
-    return write_synth(result, tmp_path_factory.mktemp("flow") / "flow16.h5")
+from rimcl.scene.study_config import StudyConfig
 
 
 def test_scene_table_lists_the_lpt_keys_with_the_stage_defaults():
@@ -37,9 +31,11 @@ def test_scene_table_lists_the_lpt_keys_with_the_stage_defaults():
             if key.default is not None and key.name != "cameras":
                 expected = list(default) if isinstance(default, tuple) else default
                 assert key.default == expected, key.dotted
-    scene = lpt_scene_from_study(load_scene())
-    assert scene.rig == RigConfig() and scene.lpt == LptSettings()
-    assert scene.illumination == IlluminationConfig()
+    camera_fields = {f.name for f in dataclasses.fields(CameraSpec)}
+    assert camera_fields == {key.name for key in camera_keys()}
+    lpt = StudyConfig.from_scene(load_scene()).lpt
+    assert lpt.rig == RigConfig() and lpt.settings == LptSettings()
+    assert lpt.illumination == IlluminationConfig()
 
 
 def test_unknown_and_bad_lpt_keys_are_refused(tmp_path):
@@ -55,13 +51,30 @@ def test_unknown_and_bad_lpt_keys_are_refused(tmp_path):
         load_scene(path)
     path.write_text('[rig]\ncameras = [{ name = "a" }]\n')
     with pytest.raises(RimclError, match="needs position_mm"):
-        lpt_scene_from_study(load_scene(path))
+        StudyConfig.from_scene(load_scene(path))
+    # camera tables without a preset: the study runs them (as rimcl lpt does); with one,
+    # the scene is refused
+    table = "[[rig.cameras]]\nposition_mm = [700, 50, 50]\nlook_at_mm = [50, 50, 50]\n"
+    path.write_text(table)
+    rig = StudyConfig.from_scene(load_scene(path)).lpt.rig
+    assert rig.preset == "" and rig.cameras[0].name == "cam1"
+    assert rig.cameras[0].position_mm == (700.0, 50.0, 50.0)
+    assert rig.cameras[0].sensor_pixels == (1920, 1200)
+    path.write_text('[rig]\npreset = "stereo"\n' + table)
+    with pytest.raises(RimclError, match="not both"):
+        StudyConfig.from_scene(load_scene(path), str(path))
+    path.write_text(table.replace("[50, 50, 50]", "[50, 50, inf]"))
+    with pytest.raises(RimclError, match=r"rig\.cameras\[0\]\.look_at_mm in .* three numbers"):
+        StudyConfig.from_scene(load_scene(path))
+    path.write_text(table + "sensor_pixel = [2, 2]\n")
+    with pytest.raises(RimclError, match="did you mean 'sensor_pixels'"):
+        StudyConfig.from_scene(load_scene(path))
 
 
-def test_study_runs_lpt(tmp_path, flow):
+def test_study_runs_lpt(tmp_path, lpt_flow):
     scene = tmp_path / "scene.toml"
     scene.write_text(
-        f'[field]\npath = "{flow}"\n[cases]\nnames = ["C1", "C3"]\n[tracers]\ncount = 20\n'
+        f'[field]\npath = "{lpt_flow}"\n[cases]\nnames = ["C1", "C3"]\n[tracers]\ncount = 20\n'
         '[time]\nframes = 5\n[run]\nmode = "lpt"\n'
         "[lpt]\ncalibration_grid = [6, 5]\nmax_rays = 4\nself_calibration_cells = [1, 2, 2]\n"
         "[illumination]\nextent = [0.5, 0.5]\n"

@@ -108,3 +108,30 @@ def test_uniform_weights_when_off():
 def test_bad_input_is_one_clear_error(options, message):
     with pytest.raises(RimclError, match=message):
         MieWeights(**options)
+
+
+def test_amplitudes_summed_in_parts_have_the_bits_of_the_complex_sums():
+    """The series is summed on real and imaginary parts apart; every bit equals the complex
+    sums' (the plain loop below), absorbing particle included."""
+    from rimcl.imaging.mie import _amplitudes
+
+    mu = np.concatenate([np.random.default_rng(2).uniform(-1, 1, 5000), [-1.0, 0.0, 1.0]])
+    for absorption in (0.0, 0.05):
+        weights = MieWeights(
+            10.0, 1.59, 1.333, 532.0, (0.0, 1.0, 0.0), particle_absorption=absorption
+        )
+        scaled_a, scaled_b = weights._scaled_coefficients()
+        s1 = np.zeros(mu.shape, dtype=np.complex128)
+        s2 = np.zeros(mu.shape, dtype=np.complex128)
+        pi_previous, pi_current = np.zeros(mu.shape), np.ones(mu.shape)
+        for n in range(1, len(scaled_a) + 1):
+            tau = n * mu * pi_current - (n + 1) * pi_previous
+            s1 += scaled_a[n - 1] * pi_current + scaled_b[n - 1] * tau
+            s2 += scaled_a[n - 1] * tau + scaled_b[n - 1] * pi_current
+            pi_previous, pi_current = (
+                pi_current,
+                ((2 * n + 1) * mu * pi_current - (n + 1) * pi_previous) / n,
+            )
+        got = _amplitudes(mu, scaled_a, scaled_b)
+        np.testing.assert_array_equal(got[0], s1)
+        np.testing.assert_array_equal(got[1], s2)

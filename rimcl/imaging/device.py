@@ -415,6 +415,91 @@ class DeviceImager:
         return out
 
 
+class PointImager:
+    """The image kernel for image points computed on the host, kept for many calls: the
+    kernel, its scratch and the rays' buffers are made once (one camera's imaging and ray
+    count; :func:`image_points` makes one for a single call).
+
+    Parameters
+    ----------
+    imaging : rimcl.imaging.frames.Imaging
+    rays_per_tracer : int
+    device : pyopencl.Device
+    max_tracers : int
+        Tracers per launch at least (:class:`DeviceImager` may raise it); more are imaged
+        in several launches.
+    """
+
+    def __init__(self, imaging, rays_per_tracer, device, max_tracers=1):
+        import pyopencl as cl
+
+        from rimcl.core.device import context_for
+
+        self.imaging = imaging
+        self.queue = profiling_queue(device)
+        self.imager = DeviceImager(imaging, rays_per_tracer, max_tracers, device, self.queue)
+        size = self.imager.max_tracers * self.imager.rays
+        context = context_for(device)
+        ro = cl.mem_flags.READ_ONLY
+        # no step counts for rays traced elsewhere: the kernel's step totals stay 0
+        self.buffers = (
+            cl.Buffer(context, ro, size=size * 16),
+            cl.Buffer(context, ro | cl.mem_flags.COPY_HOST_PTR, hostbuf=np.zeros(size, np.int32)),
+            cl.Buffer(context, ro, size=size),
+        )
+
+    def image(self, points, usable, weights, flags, scales=None, canvas=None, noise=None):
+        """Render, digitise and locate each tracer: :func:`image_points`'s parameters
+        (without ``imaging`` and ``device``) and columns."""
+        import pyopencl as cl
+
+        imager = self.imager
+        count, rays = usable.shape
+        if rays != imager.rays:
+            raise RimclError(f"this imager takes {imager.rays} rays per tracer, got {rays}")
+        first_id = None
+        if noise is not None:
+            ids = np.asarray(noise[2], dtype=np.int64).reshape(-1)
+            if len(ids) != count or (count and np.any(ids != ids[0] + np.arange(count))):
+                raise RimclError("the device engine draws noise for consecutive tracer ids only")
+            first_id = int(ids[0]) if count else 0
+        pixels = self.imaging.renderer.to_pixels(points.reshape(-1, 2))
+        pixels[~usable.reshape(-1)] = np.nan
+        # unusable rays enter as failed ones; the flags of the caller replace the kernel's
+        code = np.where(usable.reshape(-1), RAY_COLLECTED, 1).astype(np.uint8)
+        if canvas is not None:
+            imager.use_canvas(canvas.counts.shape)
+        weights = np.asarray(weights, dtype=np.float64)
+        per_tracer = weights.ndim == 2
+        shared = None if per_tracer else imager.set_weights(weights, 0)
+        parts = []
+        for first in range(0, count, imager.max_tracers):
+            last = min(first + imager.max_tracers, count)
+            rows = slice(first * rays, last * rays)
+            cl.enqueue_copy(self.queue, self.buffers[0], np.ascontiguousarray(pixels[rows]))
+            cl.enqueue_copy(self.queue, self.buffers[2], code[rows])
+            some = None if scales is None else np.asarray(scales)[first:last]
+            weight_arg = (
+                imager.set_weights(weights[first:last], last - first) if per_tracer else shared
+            )
+            key = None if noise is None else (noise[0], noise[1], first_id + first)
+            imager.enqueue(self.buffers, last - first, weight_arg, some, canvas is not None, key)
+            rows_l, rows_d = imager.empty_rows(last - first)
+            cl.wait_for_events(imager.enqueue_read(rows_l, rows_d))
+            parts.append(imager.columns(rows_l, rows_d, some))
+        out = (
+            {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
+            if parts
+            else empty_columns(0)
+        )
+        known = int(TracerFlag.RAYS_FAILED | TracerFlag.RAYS_VIGNETTED)
+        out["flags"] = (out["flags"] & ~known) | np.asarray(flags, dtype=np.int64)
+        if canvas is not None:
+            total = canvas.counts.astype(np.int64) + imager.read_canvas()
+            canvas.counts[...] = np.minimum(total, canvas.full_scale).astype(np.uint16)
+        return out
+
+
 def image_points(
     imaging, points, usable, weights, flags, scales=None, device=None, canvas=None, noise=None
 ):
@@ -422,7 +507,7 @@ def image_points(
 
     The device counterpart of :func:`rimcl.imaging.frames.image_batch`, with its parameters and
     columns, for image points computed elsewhere (the device pipeline of a measurement
-    makes them on the device instead).
+    makes them on the device instead; :class:`PointImager` keeps the kernel for many calls).
 
     Parameters
     ----------
@@ -442,42 +527,8 @@ def image_points(
     -------
     dict of str to ndarray, shape (B,)
     """
-    import pyopencl as cl
-
-    from rimcl.core.device import context_for, select_device
+    from rimcl.core.device import select_device
 
     device = select_device(device, need_fp64=True)
-    count, rays = usable.shape
-    first_id = None
-    if noise is not None:
-        ids = np.asarray(noise[2], dtype=np.int64).reshape(-1)
-        if len(ids) != count or (count and np.any(ids != ids[0] + np.arange(count))):
-            raise RimclError("the device engine draws noise for consecutive tracer ids only")
-        first_id = int(ids[0]) if count else 0
-    queue = profiling_queue(device)
-    imager = DeviceImager(imaging, rays, count, device, queue)
-    pixels = imaging.renderer.to_pixels(points.reshape(-1, 2))
-    pixels[~usable.reshape(-1)] = np.nan
-    # unusable rays enter as failed ones; the flags of the caller replace the kernel's
-    code = np.where(usable.reshape(-1), RAY_COLLECTED, 1).astype(np.uint8)
-    context = context_for(device)
-    ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
-    buffers = (
-        cl.Buffer(context, ro, hostbuf=np.ascontiguousarray(pixels)),
-        cl.Buffer(context, ro, hostbuf=np.zeros(count * rays, dtype=np.int32)),
-        cl.Buffer(context, ro, hostbuf=code),
-    )
-    if canvas is not None:
-        imager.use_canvas(canvas.counts.shape)
-    key = None if noise is None else (noise[0], noise[1], first_id)
-    weight_arg = imager.set_weights(weights, count)
-    imager.enqueue(buffers, count, weight_arg, scales, canvas is not None, key)
-    rows_l, rows_d = imager.empty_rows(count)
-    cl.wait_for_events(imager.enqueue_read(rows_l, rows_d))
-    out = imager.columns(rows_l, rows_d, scales)
-    known = int(TracerFlag.RAYS_FAILED | TracerFlag.RAYS_VIGNETTED)
-    out["flags"] = (out["flags"] & ~known) | np.asarray(flags, dtype=np.int64)
-    if canvas is not None:
-        total = canvas.counts.astype(np.int64) + imager.read_canvas()
-        canvas.counts[...] = np.minimum(total, canvas.full_scale).astype(np.uint16)
-    return out
+    imager = PointImager(imaging, usable.shape[1], device, max(len(usable), 1))
+    return imager.image(points, usable, weights, flags, scales, canvas, noise)

@@ -223,19 +223,31 @@ class MieWeights:
 
 
 def _amplitudes(mu, scaled_a, scaled_b):
-    """``S1, S2`` (up to conjugation) at cosines ``mu``, summing the series over orders."""
-    s1 = np.zeros(mu.shape, dtype=np.complex128)
-    s2 = np.zeros(mu.shape, dtype=np.complex128)
+    """``S1, S2`` (up to conjugation) at cosines ``mu``, summing the series over orders.
+
+    ``π_n`` and ``τ_n`` are real, so the real and imaginary parts are summed apart: the
+    same operations, in the same order, as the complex sums make on each part (their
+    products with the promoted zero imaginary parts add nothing), at a third of the work.
+    """
+    a_re, a_im = np.real(scaled_a), np.imag(scaled_a)
+    b_re, b_im = np.real(scaled_b), np.imag(scaled_b)
+    sums = [np.zeros(mu.shape) for _ in range(4)]  # Re S1, Im S1, Re S2, Im S2
     pi_previous = np.zeros(mu.shape)  # π_0
     pi_current = np.ones(mu.shape)  # π_1
     for n in range(1, len(scaled_a) + 1):
         tau = n * mu * pi_current - (n + 1) * pi_previous
-        s1 += scaled_a[n - 1] * pi_current + scaled_b[n - 1] * tau
-        s2 += scaled_a[n - 1] * tau + scaled_b[n - 1] * pi_current
+        sums[0] += a_re[n - 1] * pi_current + b_re[n - 1] * tau
+        sums[1] += a_im[n - 1] * pi_current + b_im[n - 1] * tau
+        sums[2] += a_re[n - 1] * tau + b_re[n - 1] * pi_current
+        sums[3] += a_im[n - 1] * tau + b_im[n - 1] * pi_current
         pi_previous, pi_current = (
             pi_current,
             ((2 * n + 1) * mu * pi_current - (n + 1) * pi_previous) / n,
         )
+    s1 = np.empty(mu.shape, dtype=np.complex128)
+    s2 = np.empty(mu.shape, dtype=np.complex128)
+    s1.real, s1.imag = sums[0], sums[1]
+    s2.real, s2.imag = sums[2], sums[3]
     return s1, s2
 
 

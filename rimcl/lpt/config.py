@@ -2,10 +2,12 @@
 
 An LPT scene is a TOML file with these three sections plus the study's ``[field]``,
 ``[cases]``, ``[tracers]``, ``[time]``, ``[integrator]``, ``[run]``, ``[fluid]``, ``[sensor]``
-and ``[mie]``
-(checked by :func:`rimcl.scene.load.validate_scene`). Every key is optional; unknown keys
-are refused with the closest valid name. Cameras are ``[[rig.cameras]]`` tables, or a
-preset (``rig.preset``) builds them from the field's size:
+and ``[mie]``, checked by :func:`rimcl.scene.validate.validate_scene` against the scene keys
+(:mod:`rimcl.scene.keys_lpt` holds the LPT ones) and parsed once into a
+:class:`rimcl.scene.study_config.StudyConfig` (the LPT sections:
+:class:`rimcl.scene.lpt_config.LptConfig`). Every key is optional; unknown keys are refused
+with the closest valid name. Cameras are ``[[rig.cameras]]`` tables, or a preset
+(``rig.preset``) builds them from the field's size:
 
 - ``lpt-challenge``: four cameras at -30°, -10°, +10° and +30° from ``x1`` in the
   ``x1``–``x2`` plane (the first LPT challenge): 1920 x 1200 pixels of 10 µm,
@@ -20,7 +22,6 @@ field's origin, ``length_m`` metres per field unit); the cameras sit beyond the 
 """
 
 import dataclasses
-import difflib
 import math
 import sys
 from pathlib import Path
@@ -28,15 +29,27 @@ from pathlib import Path
 import numpy as np
 
 from rimcl.core.errors import RimclError
+from rimcl.scene.lpt_config import CameraSpec, IlluminationConfig, LptSettings, RigConfig
+from rimcl.scene.study_config import StudyConfig
+from rimcl.scene.validate import suggest
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-PRESETS = ("lpt-challenge", "stereo")
-MODELS = ("soloff", "pinhole")
-ENGINES = ("device", "numpy")
+__all__ = [
+    "CameraSpec",
+    "IlluminationConfig",
+    "LptScene",
+    "LptSettings",
+    "RigConfig",
+    "describe",
+    "load_lpt_scene",
+    "parse_lpt_scene",
+    "preset_cameras",
+]
+
 #: Sections of the study's scene that an LPT scene uses (checked by the study's loader).
 STUDY_SECTIONS = (
     "field",
@@ -57,247 +70,31 @@ STEREO_ANGLES = (-30.0, 30.0)
 
 
 @dataclasses.dataclass(frozen=True)
-class CameraSpec:
-    """One ``[[rig.cameras]]`` table (mm, µm; positions in the field's frame)."""
-
-    position_mm: tuple
-    look_at_mm: tuple
-    focal_length_mm: float = 100.0
-    f_number: float = 16.0
-    pixel_pitch_um: float = 10.0
-    sensor_pixels: tuple = (1920, 1200)
-    scheimpflug_deg: float = 0.0
-    name: str = ""
-
-
-@dataclasses.dataclass(frozen=True)
-class RigConfig:
-    """``[rig]``: the cameras (or a preset) and the window they share."""
-
-    preset: str = "lpt-challenge"
-    cameras: tuple = ()
-    window_thickness_mm: float = 10.0
-    window_index: float = 1.52
-    outside_index: float = 1.0
-    wavelength_nm: float = 532.0
-    particle_diameter_um: float = 10.0
-
-
-@dataclasses.dataclass(frozen=True)
-class IlluminationConfig:
-    """``[illumination]``: the seeded volume (field length units).
-
-    ``thickness`` along ``x1`` (None: 0.3 of the field's ``x2`` width, the challenge's
-    30 mm over 100 mm), centred on ``centre`` (None: the field's middle ``x1``);
-    ``extent``: the fractions of the field's ``x2`` and ``x3`` widths seeded, centred;
-    ``ppp``: tracers per pixel of the first camera (None: ``tracers.count``).
-    """
-
-    thickness: float = None
-    centre: float = None
-    extent: tuple = (0.8, 0.5)
-    ppp: float = None
-
-
-@dataclasses.dataclass(frozen=True)
-class LptSettings:
-    """``[lpt]``: rays, calibration, triangulation and the engine."""
-
-    ray_tolerance_px: float = 0.01
-    max_rays: int = 128
-    calibration_planes: int = 5
-    calibration_grid: tuple = (13, 9)
-    model: str = "soloff"
-    engine: str = "device"
-    match_tolerances_px: tuple = (0.5, 1.0, 2.0)
-    images: bool = True
-    bit_depth: int = 16
-    exposure: float = 0.5
-    threshold: float = 0.05
-    self_calibration: bool = True
-    self_calibration_cells: tuple = (3, 5, 5)
-    self_calibration_iterations: int = 3
-
-
-@dataclasses.dataclass(frozen=True)
 class LptScene:
-    """A checked LPT scene: the three LPT sections and the study's scene mapping."""
+    """A checked LPT scene, parsed once (:class:`~rimcl.scene.study_config.StudyConfig`):
+    its LPT sections and the study's, typed; the scene's record only for the files."""
 
-    rig: RigConfig
-    illumination: IlluminationConfig
-    lpt: LptSettings
-    study: dict
+    study: StudyConfig
 
+    @property
+    def rig(self):
+        """:class:`~rimcl.scene.lpt_config.RigConfig`"""
+        return self.study.lpt.rig
 
-# key tables: name -> (kind, check); kinds: float, pfloat (> 0), int, str, bool, vec3, pair
-_CAMERA_KEYS = {
-    "name": "str",
-    "position_mm": "vec3",
-    "look_at_mm": "vec3",
-    "focal_length_mm": "pfloat",
-    "f_number": "pfloat",
-    "pixel_pitch_um": "pfloat",
-    "sensor_pixels": "pair_int",
-    "scheimpflug_deg": "float",
-}
-_RIG_KEYS = {
-    "preset": "str",
-    "cameras": "cameras",
-    "window_thickness_mm": "nnfloat",
-    "window_index": "pfloat",
-    "outside_index": "pfloat",
-    "wavelength_nm": "pfloat",
-    "particle_diameter_um": "nnfloat",
-}
-_ILLUMINATION_KEYS = {
-    "thickness": "pfloat",
-    "centre": "float",
-    "extent": "pair_fraction",
-    "ppp": "pfloat",
-}
-_LPT_KEYS = {
-    "ray_tolerance_px": "pfloat",
-    "max_rays": "int",
-    "calibration_planes": "int",
-    "calibration_grid": "pair_int",
-    "model": "str",
-    "engine": "str",
-    "match_tolerances_px": "pfloats",
-    "images": "bool",
-    "bit_depth": "int",
-    "exposure": "pfloat",
-    "threshold": "pfloat",
-    "self_calibration": "bool",
-    "self_calibration_cells": "triple_int",
-    "self_calibration_iterations": "int",
-}
-_CHOICES = {"rig.preset": ("", *PRESETS), "lpt.model": MODELS, "lpt.engine": ENGINES}
+    @property
+    def illumination(self):
+        """:class:`~rimcl.scene.lpt_config.IlluminationConfig`"""
+        return self.study.lpt.illumination
 
+    @property
+    def lpt(self):
+        """:class:`~rimcl.scene.lpt_config.LptSettings`"""
+        return self.study.lpt.settings
 
-def _suggest(word, candidates):
-    close = difflib.get_close_matches(str(word), list(candidates), n=1, cutoff=0.5)
-    return f"; did you mean {close[0]!r}?" if close else ""
-
-
-def _number(value, name):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise RimclError(f"{name} must be a finite number, got {value!r}")
-    return float(value)
-
-
-def _value(kind, value, name):
-    """``value`` converted to ``kind``; one clear error naming the key otherwise."""
-    if kind == "str":
-        if not isinstance(value, str):
-            raise RimclError(f"{name} must be a string, got {value!r}")
-        choices = _CHOICES.get(name)
-        if choices and value not in choices:
-            shown = ", ".join(repr(c) for c in choices)
-            raise RimclError(
-                f"{name} must be one of {shown}, got {value!r}{_suggest(value, choices)}"
-            )
-        return value
-    if kind == "bool":
-        if not isinstance(value, bool):
-            raise RimclError(f"{name} must be true or false, got {value!r}")
-        return value
-    if kind == "int":
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise RimclError(f"{name} must be a whole number >= 1, got {value!r}")
-        return int(value)
-    if kind in ("float", "pfloat", "nnfloat"):
-        number = _number(value, name)
-        if kind == "pfloat" and not number > 0:
-            raise RimclError(f"{name} must be positive, got {value!r}")
-        if kind == "nnfloat" and not number >= 0:
-            raise RimclError(f"{name} must be >= 0, got {value!r}")
-        return number
-    if kind == "vec3":
-        if not isinstance(value, list) or len(value) != 3:
-            raise RimclError(f"{name} must be three numbers [x1, x2, x3] (mm), got {value!r}")
-        return tuple(_number(v, name) for v in value)
-    if kind == "pair_int":
-        if not isinstance(value, list) or len(value) != 2:
-            raise RimclError(f"{name} must be two whole numbers, got {value!r}")
-        return tuple(_value("int", v, name) for v in value)
-    if kind == "triple_int":
-        if not isinstance(value, list) or len(value) != 3:
-            raise RimclError(f"{name} must be three whole numbers (x1, x2, x3), got {value!r}")
-        return tuple(_value("int", v, name) for v in value)
-    if kind == "pair_fraction":
-        if not isinstance(value, list) or len(value) != 2:
-            raise RimclError(f"{name} must be two fractions in (0, 1], got {value!r}")
-        pair = tuple(_number(v, name) for v in value)
-        if not all(0 < v <= 1 for v in pair):
-            raise RimclError(f"{name} must be two fractions in (0, 1], got {value!r}")
-        return pair
-    if kind == "pfloats":
-        if not isinstance(value, list) or not value:
-            raise RimclError(f"{name} must be a list of positive numbers, got {value!r}")
-        return tuple(_value("pfloat", v, name) for v in value)
-    raise AssertionError(kind)
-
-
-def _table(raw, keys, section, where):
-    if not isinstance(raw, dict):
-        raise RimclError(f"[{section}] in {where} must be a table of keys")
-    out = {}
-    for name, value in raw.items():
-        if name not in keys:
-            raise RimclError(f"unknown key {section}.{name} in {where}{_suggest(name, keys)}")
-        if keys[name] == "cameras":
-            out[name] = _cameras(value, where)
-        else:
-            out[name] = _value(keys[name], value, f"{section}.{name}")
-    return out
-
-
-def _cameras(raw, where):
-    if not isinstance(raw, list) or not all(isinstance(t, dict) for t in raw):
-        raise RimclError(f"rig.cameras in {where} must be [[rig.cameras]] tables")
-    cameras = []
-    for index, table in enumerate(raw):
-        values = _table(table, _CAMERA_KEYS, f"rig.cameras[{index}]", where)
-        for needed in ("position_mm", "look_at_mm"):
-            if needed not in values:
-                raise RimclError(f"rig.cameras[{index}] in {where} needs {needed}")
-        values.setdefault("name", f"cam{index + 1}")
-        cameras.append(CameraSpec(**values))
-    names = [c.name for c in cameras]
-    if len(set(names)) != len(names):
-        raise RimclError(f"rig.cameras in {where}: camera names must differ, got {names}")
-    return tuple(cameras)
-
-
-def _sections(raw_rig, raw_illumination, raw_lpt, where):
-    """The three LPT sections checked and filled in."""
-    rig = _table(raw_rig, _RIG_KEYS, "rig", where)
-    if rig.get("cameras"):
-        # cameras given: the preset is only what the user names
-        rig.setdefault("preset", "")
-        if rig["preset"]:
-            raise RimclError(f"{where}: give rig.preset or [[rig.cameras]], not both")
-    elif rig.get("preset", "lpt-challenge") == "":
-        raise RimclError(f'{where}: rig.preset = "" needs [[rig.cameras]] tables')
-    if not rig.get("cameras"):
-        rig.pop("cameras", None)
-    illumination = _table(raw_illumination, _ILLUMINATION_KEYS, "illumination", where)
-    settings = LptSettings(**_table(raw_lpt, _LPT_KEYS, "lpt", where))
-    if settings.calibration_planes < 3:
-        raise RimclError(f"lpt.calibration_planes in {where}: the Soloff fit needs at least 3")
-    if not 8 <= settings.bit_depth <= 16:
-        raise RimclError(f"lpt.bit_depth in {where} must be 8 to 16, got {settings.bit_depth}")
-    for name in ("exposure", "threshold"):
-        if not getattr(settings, name) < 1:
-            raise RimclError(f"lpt.{name} in {where} must be a fraction below 1")
-    if settings.self_calibration and settings.model != "soloff":
-        raise RimclError(
-            f"{where}: lpt.self_calibration corrects Soloff models; set lpt.model = "
-            '"soloff" or lpt.self_calibration = false'
-        )
-    if min(settings.calibration_grid) < 4:
-        raise RimclError(f"lpt.calibration_grid in {where}: at least 4 x 4 points per plane")
-    return RigConfig(**rig), IlluminationConfig(**illumination), settings
+    @property
+    def measure(self):
+        """The study's shared sections (:class:`rimcl.scene.config.MeasureConfig`)."""
+        return self.study.shared
 
 
 def parse_lpt_scene(raw, where="the scene"):
@@ -316,31 +113,18 @@ def parse_lpt_scene(raw, where="the scene"):
     """
     from rimcl.scene.validate import validate_scene
 
-    raw = dict(raw)
-    sections = _sections(raw.pop("rig", {}), raw.pop("illumination", {}), raw.pop("lpt", {}), where)
     for section in raw:
-        if section not in STUDY_SECTIONS:
+        if section not in STUDY_SECTIONS and section not in ("rig", "illumination", "lpt"):
             known = (*STUDY_SECTIONS, "rig", "illumination", "lpt")
             raise RimclError(
                 f"section [{section}] in {where} does not apply to LPT (its sections: "
-                f"{', '.join(known)}){_suggest(section, known)}"
+                f"{', '.join(known)}){suggest(section, known)}"
             )
     cases_given = "names" in raw.get("cases", {})
-    study = validate_scene(raw, where)
+    scene = validate_scene(dict(raw), where)
     if not cases_given:
-        study["cases"]["names"] = list(DEFAULT_CASES)
-    return LptScene(*sections, study)
-
-
-def lpt_scene_from_study(scene, where="the scene"):
-    """The LPT scene of a complete, checked study scene (``rimcl study``, ``run.mode =
-    "lpt"``): its ``[rig]``, ``[illumination]`` and ``[lpt]`` sections (keys left to the
-    pipeline omitted) and the whole scene as the study's part."""
-    raw = [
-        {name: value for name, value in scene[section].items() if value is not None}
-        for section in ("rig", "illumination", "lpt")
-    ]
-    return LptScene(*_sections(*raw, where), scene)
+        scene["cases"]["names"] = list(DEFAULT_CASES)
+    return LptScene(StudyConfig.from_scene(scene, where))
 
 
 def load_lpt_scene(path=None):

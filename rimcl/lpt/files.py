@@ -78,7 +78,7 @@ def write_case(path, run, result, scene, overwrite=True):
         h5.attrs["n_ref"] = result["n_ref"]
         h5.attrs["length_m"] = run.length_m
         h5.attrs["units"] = json.dumps(_units(run))
-        stamp_h5(h5, {**describe(scene), "study_scene": scene.study})
+        stamp_h5(h5, {**describe(scene), "study_scene": scene.study.scene_record()})
         frames, count = run.true.shape[:2]
 
         def tracer_group(name, pixel_axis=False):

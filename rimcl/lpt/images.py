@@ -8,10 +8,13 @@ rays per tracer so that a tracer's light does not depend on the count. The rays 
 rendered in a window per tracer (pixel-integrated Gaussians of the camera's diffraction
 σ, :class:`rimcl.imaging.render.Renderer` ``exact``), digitised by the sensor
 (:class:`rimcl.imaging.sensor.Sensor`, shot and read noise when ``sensor.noise``) and
-located by the thresholded grey-weighted centroid (:func:`rimcl.imaging.centroid.locate`):
-the NumPy engine of PTV, :func:`rimcl.imaging.frames.image_batch`. The same call gives the
-optics centroid (the light-weighted mean of the rays' image points, no pixels): the optics
-part of the error; the located centroid minus it is the imaging part.
+located by the thresholded grey-weighted centroid (:func:`rimcl.imaging.centroid.locate`),
+by either engine of PTV (``run.engine``): the NumPy engine,
+:func:`rimcl.imaging.frames.image_batch`, or the device's image kernel
+(:class:`rimcl.imaging.device.PointImager`, ``cl/image.cl``) on the same image points, whose
+centroids equal the NumPy engine's to the last bit where the digitised images agree. The
+same call gives the optics centroid (the light-weighted mean of the rays' image points, no
+pixels): the optics part of the error; the located centroid minus it is the imaging part.
 
 **Exposure.** A camera records light with one gain for every tracer (not one per tracer):
 the rig's exposure is set so that the median tracer of the brightest camera (its
@@ -176,7 +179,15 @@ class Located:
     peak: np.ndarray
 
 
-def locate_view(imaging, view, light, scale, key, canvas=None):
+def device_imager(imaging, rays, tracers, device):
+    """The device engine of one camera's ``imaging`` for ``rays`` per tracer and batches of
+    ``tracers`` (None without a ``device``: the NumPy engine)."""
+    from rimcl.imaging.device import PointImager
+
+    return None if device is None else PointImager(imaging, rays, device, tracers)
+
+
+def locate_view(imaging, view, light, scale, key, canvas=None, imager=None):
     """Render, digitise and locate every tracer of a view.
 
     Parameters
@@ -191,6 +202,9 @@ def locate_view(imaging, view, light, scale, key, canvas=None):
         ``(pass, frame, camera index)`` of the noise draws.
     canvas : rimcl.imaging.render.FrameImage, optional
         Receives each tracer's counts (the camera's frame).
+    imager : rimcl.imaging.device.PointImager, optional
+        The device engine of ``imaging`` and the view's rays per tracer
+        (:func:`device_imager`); None: the NumPy engine.
 
     Returns
     -------
@@ -201,16 +215,12 @@ def locate_view(imaging, view, light, scale, key, canvas=None):
     flags = np.where(view.failed > 0, int(TracerFlag.RAYS_FAILED), 0)
     pass_id, frame, camera_index = key
     ids = camera_index * count + np.arange(count)
-    out = image_batch(
-        imaging,
-        np.nan_to_num(view.images),
-        usable,
-        light,
-        flags,
-        scales=np.full(count, scale),
-        canvas=canvas,
-        noise=(pass_id, frame, ids),
-    )
+    rays = (np.nan_to_num(view.images), usable, light, flags)
+    options = {"scales": np.full(count, scale), "canvas": canvas, "noise": (pass_id, frame, ids)}
+    if imager is None:
+        out = image_batch(imaging, *rays, **options)
+    else:
+        out = imager.image(*rays, **options)
     return Located(
         np.column_stack([out["x2"], out["x3"]]),
         np.column_stack([out["x2_opt"], out["x3_opt"]]),

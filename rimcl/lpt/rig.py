@@ -27,7 +27,8 @@ import dataclasses
 import numpy as np
 
 from rimcl.core.errors import RimclError
-from rimcl.optics.camera import FlatWindow, aim_through_layers, cross_window
+from rimcl.optics.camera import FlatWindow
+from rimcl.optics.layers import aim_through_layers, cross_window
 
 # golden angle (rad): successive points of a Vogel spiral are this far apart in azimuth
 _GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))

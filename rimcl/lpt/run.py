@@ -37,6 +37,7 @@ from rimcl.lpt.flow import BUILTIN_DT, Volume, builtin_flow, volume_velocity
 from rimcl.lpt.images import (
     PASSES,
     camera_imaging,
+    device_imager,
     locate_view,
     new_canvas,
     noiseless,
@@ -91,46 +92,46 @@ def prepare(scene, out_dir, timings):
     from rimcl.fields.field_reader import FieldFile
     from rimcl.ptv.track import integrate_tracks, track_acceleration, track_velocity
 
-    study = scene.study
-    frames, dt = study["time"]["frames"], study["time"]["dt"]
-    if frames < study["time"]["fit_window"]:
+    times = scene.measure.time
+    frames, dt = times.frames, times.dt
+    if frames < times.fit_window:
         raise RimclError(
             f"time.frames = {frames} is fewer than the fit window time.fit_window = "
-            f"{study['time']['fit_window']}"
+            f"{times.fit_window}"
         )
     started = time.perf_counter()
-    path = study["field"]["path"]
+    path = scene.study.field_path
     if not path:
         dt = BUILTIN_DT if dt is None else dt
-        path = builtin_flow(out_dir, frames + study["field"]["start_frame"], dt)
+        path = builtin_flow(out_dir, frames + times.start_frame, dt)
     source = FieldFile(path)
     if dt is None:
         if source.n_frames < 2:
             raise RimclError(f"{path} holds one frame: give time.dt")
         dt = float(source.times[1] - source.times[0])
-    first = study["field"]["start_frame"]
+    first = times.start_frame
     if first >= source.n_frames:
         raise RimclError(f"field.start_frame = {first}, but {path} holds {source.n_frames} frames")
     t0 = float(source.times[first])
-    times = t0 + dt * np.arange(frames)
+    moments = t0 + dt * np.arange(frames)
     timings["flow"] = time.perf_counter() - started
     volume = Volume.of(source, scene.illumination)
     width = volume.hi[1] - volume.lo[1]
-    length_m = study["field"]["length_m"] or 0.1 / width
+    length_m = scene.study.lpt.length_m or 0.1 / width
     started = time.perf_counter()
-    velocity = volume_velocity(source, times[0], times[-1])
-    count = study["tracers"]["count"]
+    velocity = volume_velocity(source, moments[0], moments[-1])
+    count = scene.measure.tracers.count
     if scene.illumination.ppp is not None:
         spec = scene.rig.cameras[0] if scene.rig.cameras else CameraSpec((0, 0, 0), (0, 0, 0))
         count = max(
             1, round(scene.illumination.ppp * spec.sensor_pixels[0] * spec.sensor_pixels[1])
         )
-    start = volume.seed(count, np.random.default_rng(study["tracers"]["seed"]))
-    true = integrate_tracks(velocity, start, times)
-    u_true = track_velocity(velocity, true, times)
-    a_true = track_acceleration(velocity, true, times)
+    start = volume.seed(count, np.random.default_rng(scene.measure.tracers.seed))
+    true = integrate_tracks(velocity, start, moments)
+    u_true = track_velocity(velocity, true, moments)
+    a_true = track_acceleration(velocity, true, moments)
     timings["tracks"] = time.perf_counter() - started
-    return Run(source, times, float(length_m), volume, true, u_true, a_true)
+    return Run(source, moments, float(length_m), volume, true, u_true, a_true)
 
 
 def rig_cameras(rig, volume, length_m, fluid_index):
@@ -174,14 +175,14 @@ def rig_cameras(rig, volume, length_m, fluid_index):
 
 
 def _tracer(scene, device):
-    study = scene.study
+    integrator = scene.measure.integrator
     return Tracer(
         engine=scene.lpt.engine,
-        interp=study["integrator"]["interp"],
-        precision=study["integrator"]["precision"],
-        step=study["integrator"]["step"],
+        interp=integrator.interp,
+        precision=integrator.precision,
+        step=integrator.step,
         device=device,
-        batch_size=study["run"]["rays_per_batch"],
+        batch_size=scene.measure.run.rays_per_batch,
     )
 
 
@@ -215,18 +216,17 @@ def _off_sensor(camera, pixels):
 def _sensor_and_mie(scene, n_ref):
     """The sensor (``[sensor]``, ``lpt.bit_depth`` bits) and the Mie weights (``[mie]``; the
     particle's surroundings default to the case's reference fluid), or None with Mie off."""
-    from rimcl.scene.config import MieConfig, SensorConfig
-
-    study = scene.study
-    sensor = SensorConfig(**study["sensor"]).build(scene.lpt.bit_depth, study["tracers"]["seed"])
-    mie = MieConfig(**study["mie"])
+    measure = scene.measure
+    sensor = measure.sensor.build(scene.lpt.bit_depth, measure.tracers.seed)
+    mie = measure.mie
     if mie.fluid_index is None:
         mie = dataclasses.replace(mie, fluid_index=float(n_ref))
     return sensor, mie.build()
 
 
-def _choose_rays(field, cameras, imagings, exposure, sensor, mie, points, tracer, settings):
-    """Per camera, the ray count whose located centroid (noiseless sensor) has converged."""
+def _choose_rays(field, cameras, imagings, exposure, sensor, mie, points, tracer, settings, device):
+    """Per camera, the ray count whose located centroid (noiseless sensor) has converged
+    (imaged on ``device``, or by the NumPy engine without one)."""
     choices = []
     for c, camera in enumerate(cameras):
         quiet = dataclasses.replace(imagings[c], sensor=noiseless(sensor))
@@ -234,7 +234,10 @@ def _choose_rays(field, cameras, imagings, exposure, sensor, mie, points, tracer
         def located(seen, quiet=quiet, c=c):
             light = ray_light(seen, mie)
             key = (PASSES["meas"], 0, c)
-            return locate_view(quiet, seen, light, exposure.counts_per_light, key).centroid
+            imager = device_imager(quiet, light.shape[1], len(light), device)
+            return locate_view(
+                quiet, seen, light, exposure.counts_per_light, key, None, imager
+            ).centroid
 
         choices.append(
             choose_ray_count(
@@ -269,12 +272,10 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
         exposure, ray choices and stage ``timings`` (s).
     """
     from rimcl.ptv.field_source import case_of
-    from rimcl.scene.config import FluidConfig
 
     timings = {}
-    study = scene.study
     settings = scene.lpt
-    index = case_of(run.source, case, None, FluidConfig(**study["fluid"]))
+    index = case_of(run.source, case, None, scene.measure.fluid)
     started = time.perf_counter()
     field0 = index.field(run.source, None, run.times[0])
     timings["field"] = time.perf_counter() - started
@@ -283,7 +284,14 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     target, fitted = calibrate_rig(cameras, run.volume, settings)
     models = [f[settings.model] for f in fitted]
     timings["calibration"] = time.perf_counter() - started
-    tracer = _tracer(scene, device)
+    # run.engine: tracer images on the device (its image kernel, which needs fp64; the
+    # rays are traced there too) or by the NumPy engine
+    imaging_device = None
+    if scene.measure.run.engine == "device":
+        from rimcl.core.device import select_device
+
+        imaging_device = select_device(device, need_fp64=True)
+    tracer = _tracer(scene, imaging_device or device)
     uniform = uniform_field(field0)
     sensor, mie = _sensor_and_mie(scene, field0.n_ref)
     started = time.perf_counter()
@@ -292,10 +300,13 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     imagings = [camera_imaging(camera, c, exposure, sensor) for c, camera in enumerate(cameras)]
     sample = run.true[0][:RAY_SAMPLE]
     choices = _choose_rays(
-        field0, cameras, imagings, exposure, sensor, mie, sample, tracer, settings
+        field0, cameras, imagings, exposure, sensor, mie, sample, tracer, settings, imaging_device
     )
-    timings["ray_choice"] = time.perf_counter() - started
     frames, count, ncam = run.true.shape[0], run.true.shape[1], len(cameras)
+    imagers = [
+        device_imager(imagings[c], choices[c]["rays"], count, imaging_device) for c in range(ncam)
+    ]
+    timings["ray_choice"] = time.perf_counter() - started
     kinds = ("meas", "ref")
     centroid = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
     optics = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
@@ -320,6 +331,7 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
                     exposure.scale,
                     (PASSES[kind], k, c),
                     canvas,
+                    imagers[c],
                 )
                 timings["views"] += middle - started
                 timings["images"] += time.perf_counter() - middle
@@ -477,7 +489,6 @@ def case_statistics(run, result, scene):
     """Errors per component and the lost-match fractions of one case (JSON-able)."""
     from rimcl.ptv.track import sliding_fit
 
-    study = scene.study
     keep = result["flags"] == 0
     frames = run.true.shape[0]
     ids = np.broadcast_to(np.arange(keep.size), (frames, keep.size))[:, keep].ravel()
@@ -535,7 +546,7 @@ def case_statistics(run, result, scene):
             },
         }
     stats["disparity"] = disparity
-    window, order = study["time"]["fit_window"], study["time"]["fit_order"]
+    window, order = scene.measure.time.fit_window, scene.measure.time.fit_order
     dt = float(run.times[1] - run.times[0]) if run.times.size > 1 else None
     fits = {
         kind: sliding_fit(result[f"x_{kind}"][:, keep], dt, window, order)
@@ -618,7 +629,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
     run = prepare(scene, out_dir, timings)
     document = {
         "scene": describe_scene(scene),
-        "study_scene": scene.study,
+        "study_scene": scene.study.scene_record(),
         "volume": run.volume.describe(),
         "length_m": run.length_m,
         "times": run.times.tolist(),
@@ -628,7 +639,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
         "cases": {},
     }
     try:
-        for case in scene.study["cases"]["names"]:
+        for case in scene.study.names:
             sink = frame_writer(out_dir, scene, overwrite) if dataset and scene.lpt.images else None
             result = run_case(run, scene, case, device, progress, sink)
             stats = case_statistics(run, result, scene)

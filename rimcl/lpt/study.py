@@ -10,30 +10,29 @@ finished results unless forced.
 import json
 from pathlib import Path
 
-from rimcl.core.provenance import to_json
-from rimcl.lpt.config import lpt_scene_from_study
+from rimcl.lpt.config import LptScene
 from rimcl.lpt.run import run_lpt, summary_lines
 from rimcl.stats.tables import write_json
 
 LPT_DIR = "lpt"
 
 
-def _finished(path, scene):
+def _finished(path, study):
     """The earlier ``lpt_stats.json`` of this same scene, or None."""
     try:
         previous = json.loads(Path(path).read_text())
     except (OSError, ValueError):
         return None
-    return previous if previous.get("study_scene") == json.loads(to_json(scene)) else None
+    return previous if previous.get("study_scene") == study.scene_record() else None
 
 
-def run_lpt_study(scene, out_dir, *, force=False, figures=True, report=None):
+def run_lpt_study(study, out_dir, *, force=False, figures=True, report=None):
     """Run the LPT chain of a study scene into ``out_dir``.
 
     Parameters
     ----------
-    scene : dict
-        A complete, checked scene (:func:`rimcl.scene.load.load_scene`).
+    study : rimcl.scene.study_config.StudyConfig
+        The study, parsed once from its scene.
     out_dir : Path
     force : bool
         Redo it even if a finished run of the same scene is there.
@@ -49,12 +48,12 @@ def run_lpt_study(scene, out_dir, *, force=False, figures=True, report=None):
         ``["lpt/<case>", …]`` measured in this call (empty when kept).
     """
     say = report or (lambda line: None)
-    lpt_scene = lpt_scene_from_study(scene)
+    lpt_scene = LptScene(study)
     folder = Path(out_dir) / LPT_DIR
-    document = None if force else _finished(folder / "lpt_stats.json", scene)
+    document = None if force else _finished(folder / "lpt_stats.json", study)
     ran = []
     if document is None:
-        say(f"lpt: cases {', '.join(scene['cases']['names'])}")
+        say(f"lpt: cases {', '.join(study.names)}")
 
         def progress(case, frame, frames):
             if frame == frames:
@@ -63,7 +62,7 @@ def run_lpt_study(scene, out_dir, *, force=False, figures=True, report=None):
         document = run_lpt(
             lpt_scene,
             folder,
-            device=scene["run"]["device"] or None,
+            device=study.shared.run.device,
             progress=progress,
             overwrite=True,
         )
@@ -74,7 +73,11 @@ def run_lpt_study(scene, out_dir, *, force=False, figures=True, report=None):
         from rimcl.lpt.figures import write_lpt_figures
 
         write_lpt_figures(document, Path(out_dir) / "figures", overwrite=True)
-    stats = {"config": {"scene": scene, "study_dir": str(out_dir)}, "cases": [], "lpt": document}
+    stats = {
+        "config": {"scene": study.scene_record(), "study_dir": str(out_dir)},
+        "cases": [],
+        "lpt": document,
+    }
     write_json(Path(out_dir) / "stats.json", stats, True)
     summary = ["# LPT study", "", "```", *summary_lines(document), "```", ""]
     (Path(out_dir) / "summary.md").write_text("\n".join(summary), encoding="utf-8")

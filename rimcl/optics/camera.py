@@ -19,6 +19,7 @@ import dataclasses
 import numpy as np
 
 from rimcl.core.errors import RimclError
+from rimcl.optics.layers import aim_through_layers, cross_window
 
 CAMERAS = ("plane", "pupil", "lens")
 
@@ -418,74 +419,6 @@ class FlatWindow:
 
     def describe(self):
         return dataclasses.asdict(self)
-
-
-def _refract(directions, ratio):
-    """Snell at a plane of normal ``x1``: unit directions into a medium with
-    ``n_in / n_out = ratio`` (scalar or (K,)). Returns directions, NaN where reflected."""
-    tangential = directions[:, 1:] * np.reshape(ratio, (-1, 1))
-    with np.errstate(invalid="ignore"):
-        normal = np.sqrt(1.0 - np.sum(tangential**2, axis=1))
-    refracted = np.column_stack([normal, tangential])
-    refracted[np.isnan(normal)] = np.nan
-    return refracted
-
-
-def aim_through_layers(lateral, depths, ratios):
-    """Unit start directions of rays that cross flat layers normal to ``x1`` and reach a
-    given lateral offset (Snell at every interface).
-
-    Parameters
-    ----------
-    lateral : ndarray, shape (..., 2)
-        ``(x2, x3)`` offset from the start to the aim point (length units).
-    depths : ndarray, shape (3,) or (..., 3)
-        ``x1`` thickness of each layer, the start's first (length units, >= 0).
-    ratios : ndarray, shape (3,)
-        ``n_start / n_layer`` of each layer (1 for the first).
-
-    Returns
-    -------
-    ndarray, float64, shape (..., 3)
-        Directions in the first layer, towards ``+x1``.
-    """
-    reach = np.linalg.norm(lateral, axis=-1)
-    # lateral run = Σ depth_i tan θ_i with sin θ_i = ratio_i sin θ (Snell at both faces)
-    sine = np.minimum(reach / np.sum(depths * ratios, axis=-1), 0.999 / ratios.max())
-    for _ in range(50):  # convex and increasing: Newton from above converges monotonically
-        s = sine[..., None] * ratios
-        cosine = np.sqrt(1.0 - s**2)
-        run = np.sum(depths * s / cosine, axis=-1)
-        # c·c·c, not c**3: a pow whose last bit depends on the CPU (SIMD or libm)
-        slope = np.sum(depths * ratios / (cosine * cosine * cosine), axis=-1)
-        sine = sine - (run - reach) / slope
-    unit = np.divide(
-        lateral, reach[..., None], out=np.zeros_like(lateral), where=reach[..., None] > 0
-    )
-    return np.concatenate([np.sqrt(1.0 - sine**2)[..., None], sine[..., None] * unit], axis=-1)
-
-
-def cross_window(end_pos, end_dir, thickness, fluid_index, window):
-    """Rays leaving the fluid at ``x1 = x_end`` carried through a flat window.
-
-    Parameters
-    ----------
-    end_pos, end_dir : ndarray, shape (K, 3)
-        Exit points on the window's inner face and unit directions in the fluid.
-    thickness : float
-        The window's thickness (length units of ``end_pos``).
-    fluid_index : float or ndarray, shape (K,)
-        Index of the fluid at each exit point.
-    window : FlatWindow
-
-    Returns
-    -------
-    positions, directions : ndarray, shape (K, 3)
-        On the outer face, and unit directions outside; NaN where reflected totally.
-    """
-    in_glass = _refract(end_dir, fluid_index / window.glass_index)
-    positions = end_pos + (thickness / in_glass[:, :1]) * in_glass
-    return positions, _refract(end_dir, fluid_index / window.outside_index)
 
 
 @dataclasses.dataclass(frozen=True)

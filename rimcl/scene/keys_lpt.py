@@ -1,12 +1,54 @@
 """Scene keys of 3-D particle tracking (``run.mode = "lpt"``, ``rimcl lpt``).
 
 The sections ``[rig]`` (the cameras and their window), ``[illumination]`` (the seeded
-volume) and ``[lpt]`` (rays, images, calibration, self-calibration, matching). The LPT stage
-(:mod:`rimcl.lpt.config`) checks the camera tables and the combinations; these are the
-names, defaults and meanings.
+volume) and ``[lpt]`` (rays, images, calibration, self-calibration, matching), and the keys
+of each ``[[rig.cameras]]`` table: the one table of their names, defaults, meanings and
+limits. :mod:`rimcl.scene.lpt_config` parses them (the camera tables and the combinations
+that no single key can check).
 """
 
 from rimcl.scene.key import SceneKey
+
+#: The preset a scene without ``[[rig.cameras]]`` tables runs.
+DEFAULT_PRESET = "lpt-challenge"
+#: Section name of the camera tables' keys (``[[rig.cameras]]``).
+CAMERA_SECTION = "rig.cameras"
+
+
+def camera_keys():
+    """The keys of each ``[[rig.cameras]]`` table (mm, µm; the field's frame)."""
+    return (
+        SceneKey(CAMERA_SECTION, "name", "", "str", 'camera name ("": cam1, cam2, ...)'),
+        SceneKey(
+            CAMERA_SECTION,
+            "position_mm",
+            None,
+            "vector",
+            "pupil centre (mm in the field's frame, from its origin; required)",
+            example=[640.0, 50.0, 50.0],
+        ),
+        SceneKey(
+            CAMERA_SECTION,
+            "look_at_mm",
+            None,
+            "vector",
+            "the point imaged to the sensor centre (mm; required)",
+            example=[50.0, 50.0, 50.0],
+        ),
+        SceneKey(CAMERA_SECTION, "focal_length_mm", 100.0, "float", "mm", positive=True),
+        SceneKey(CAMERA_SECTION, "f_number", 16.0, "float", "f-number", positive=True),
+        SceneKey(CAMERA_SECTION, "pixel_pitch_um", 10.0, "float", "µm", positive=True),
+        SceneKey(CAMERA_SECTION, "sensor_pixels", [1920, 1200], "ints", "columns, rows"),
+        SceneKey(CAMERA_SECTION, "scheimpflug_deg", 0.0, "float", "sensor tilt (degrees)"),
+    )
+
+
+def _camera_table_doc():
+    described = ", ".join(
+        f"{key.name} ({'required' if key.default is None else repr(key.default)})"
+        for key in camera_keys()
+    )
+    return f"[[rig.cameras]] tables, mm in the field's frame: {described}"
 
 
 def lpt_keys():
@@ -15,23 +57,16 @@ def lpt_keys():
         SceneKey(
             "rig",
             "preset",
-            "lpt-challenge",
+            None,
             "str",
             "lpt-challenge: four cameras at -30, -10, +10, +30 degrees from x1 in the x1-x2 "
             "plane (1920 x 1200 px of 10 µm, f = 100 mm, f/16), placed so the field's x2 width "
             'fills 96 % of the sensor; stereo: the +-30 degree pair; "": the [[rig.cameras]] '
-            "tables",
-            choices=("lpt-challenge", "stereo", ""),
+            f"tables; default {DEFAULT_PRESET}, or the tables where there are some",
+            choices=(DEFAULT_PRESET, "stereo", ""),
+            example=DEFAULT_PRESET,
         ),
-        SceneKey(
-            "rig",
-            "cameras",
-            [],
-            "tables",
-            "[[rig.cameras]] tables: name, position_mm, look_at_mm (mm in the field's frame, "
-            "required), focal_length_mm (100), f_number (16), pixel_pitch_um (10), "
-            "sensor_pixels ([1920, 1200]), scheimpflug_deg (0)",
-        ),
+        SceneKey("rig", "cameras", [], "tables", _camera_table_doc()),
         SceneKey(
             "rig",
             "window_thickness_mm",

@@ -63,7 +63,8 @@ def default_scene_text():
     for section in SECTIONS:
         lines += ["", f"[{section}]"]
         for key in (k for k in SCENE_KEYS if k.section == section):
-            note = f" (one of: {', '.join(key.choices)})" if key.choices else ""
+            shown = ", ".join(choice or '""' for choice in key.choices)
+            note = f" (one of: {shown})" if key.choices else ""
             lines += textwrap.wrap(
                 key.doc + note, width=88, initial_indent="# ", subsequent_indent="#   "
             )

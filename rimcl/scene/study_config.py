@@ -3,8 +3,9 @@
 :meth:`StudyConfig.from_scene` turns a checked scene (:func:`rimcl.scene.load.load_scene`)
 into frozen objects: the field file, the cases with their thresholds, the measurement they
 share (:class:`rimcl.scene.config.MeasureConfig`; :meth:`StudyConfig.measure` gives each
-case's), how the study runs, the Δt sweep and the PIV section. Every stage after the entry
-(case files, Dask tasks, PIV, statistics, summary) takes these objects; none reads the
+case's), how the study runs, the Δt sweep, the PIV section and the LPT sections
+(:class:`rimcl.scene.lpt_config.LptConfig`). Every stage after the entry (case files, Dask
+tasks, PIV, LPT, statistics, summary) takes these objects; none reads the
 scene's dict. The scene itself travels only as one JSON text made at the entry
 (:attr:`StudyConfig.scene_json`): the record written to ``scene.toml`` and ``stats.json``
 and stamped into case files, never read for a setting.
@@ -15,6 +16,7 @@ import json
 
 from rimcl.scene.config import MeasureConfig
 from rimcl.scene.load import scene_text
+from rimcl.scene.lpt_config import LptConfig, lpt_config
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,6 +108,8 @@ class StudyConfig:
     dt_multiples : tuple of int
         ``time.dt_multiples`` (the Δt sweep, :mod:`rimcl.ptv.sweep`).
     piv : PivStudyConfig
+    lpt : rimcl.scene.lpt_config.LptConfig
+        ``[rig]``, ``[illumination]`` and ``[lpt]`` (``run.mode = "lpt"``).
     scene_json : str
         The checked scene as JSON text: the record of what was asked (``scene.toml``,
         ``stats.json``, the stamps of case files).
@@ -117,11 +121,13 @@ class StudyConfig:
     run: StudyRunConfig
     dt_multiples: tuple
     piv: PivStudyConfig
+    lpt: LptConfig
     scene_json: str
 
     @classmethod
-    def from_scene(cls, scene):
-        """The study of a checked scene (:func:`rimcl.scene.load.load_scene`)."""
+    def from_scene(cls, scene, where="the scene"):
+        """The study of a checked scene (:func:`rimcl.scene.load.load_scene`); ``where``
+        is named in the errors of the checks that span keys (the LPT sections')."""
         thresholds, default = scene["cases"]["thresholds"], scene["renderer"]["threshold"]
         run = scene["run"]
         return cls(
@@ -139,6 +145,7 @@ class StudyConfig:
             ),
             dt_multiples=tuple(scene["time"]["dt_multiples"]),
             piv=PivStudyConfig(**scene["piv"]),
+            lpt=lpt_config(scene, where),
             scene_json=json.dumps(scene),
         )
 

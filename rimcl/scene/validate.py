@@ -13,12 +13,18 @@ from rimcl.core.errors import RimclError
 from rimcl.scene.keys import KEYS_BY_NAME, SCENE_KEYS, SECTIONS, default_scene
 
 
-def _suggest(word, candidates):
+def suggest(word, candidates):
+    """The hint "; did you mean NAME?" for the closest of ``candidates``, or ""."""
     close = difflib.get_close_matches(word, list(candidates), n=1, cutoff=0.5)
     return f"; did you mean {close[0]!r}?" if close else ""
 
 
-def _check_value(key, value, where):
+def _shown(choice):
+    """A choice as an error names it ("" written out)."""
+    return choice or '""'
+
+
+def check_value(key, value, where):
     """The value of ``key`` converted and checked; raises RimclError naming ``where``."""
     name = f"{key.dotted} in {where}"
     if key.kind == "names":
@@ -41,8 +47,8 @@ def _check_value(key, value, where):
             raise RimclError(f"{name} must be a string, got {value!r}")
         if key.choices and value not in key.choices:
             raise RimclError(
-                f"{name} must be one of {', '.join(key.choices)}, got {value!r}"
-                + _suggest(value, key.choices)
+                f"{name} must be one of {', '.join(map(_shown, key.choices))}, got {value!r}"
+                + suggest(value, key.choices)
             )
         return value
     if key.kind == "ints":
@@ -72,6 +78,7 @@ def _check_value(key, value, where):
             isinstance(value, list)
             and len(value) == 3
             and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+            and all(math.isfinite(v) for v in value)
         ):
             raise RimclError(f"{name} must be three numbers [x1, x2, x3], got {value!r}")
         return [float(v) for v in value]
@@ -125,7 +132,7 @@ def _check_cases(names, where):
                 continue
             resolved.append(resolve_k_rho(case=case)[0])
         except RimclError as exc:
-            raise RimclError(f"{where}: {exc}{_suggest(case.upper(), CASES)}") from None
+            raise RimclError(f"{where}: {exc}{suggest(case.upper(), CASES)}") from None
     # one case however written: dT=3 and dT=3.0 are the same fluid difference
     same = [fluid_case(name) or name for name in resolved]
     repeated = [name for name, key in zip(resolved, same, strict=True) if same.count(key) > 1]
@@ -196,9 +203,7 @@ def validate_scene(raw, where="the scene"):
     scene = default_scene()
     for section, table in raw.items():
         if section not in scene:
-            raise RimclError(
-                f"unknown section [{section}] in {where}" + _suggest(section, SECTIONS)
-            )
+            raise RimclError(f"unknown section [{section}] in {where}" + suggest(section, SECTIONS))
         if not isinstance(table, dict):
             raise RimclError(f"[{section}] in {where} must be a table of keys")
         for name, value in table.items():
@@ -208,10 +213,10 @@ def validate_scene(raw, where="the scene"):
                 hint = (
                     f"; did you mean {elsewhere[0]!r}?"
                     if elsewhere
-                    else _suggest(name, [k.name for k in SCENE_KEYS if k.section == section])
+                    else suggest(name, [k.name for k in SCENE_KEYS if k.section == section])
                 )
                 raise RimclError(f"unknown key {section}.{name} in {where}{hint}")
-            scene[section][name] = _check_value(key, value, where)
+            scene[section][name] = check_value(key, value, where)
     from rimcl.fields.cases import fluid_case
 
     fluid_cases = [c for c in scene["cases"]["names"] if fluid_case(c) is not None]

@@ -394,10 +394,7 @@ def run_study(
             from rimcl.lpt.study import run_lpt_study
 
             scene_file.settle()
-            # the LPT stage parses its own sections ([rig], [illumination], [lpt]) of the record
-            stats, ran = run_lpt_study(
-                study.scene_record(), out_dir, force=force, figures=figures, report=say
-            )
+            stats, ran = run_lpt_study(study, out_dir, force=force, figures=figures, report=say)
             elapsed = time.perf_counter() - started
             return StudyResult(out_dir, stats, ran, [], {}, True, elapsed)
         ran, skipped, seconds = [], [], {}

@@ -1,0 +1,209 @@
+"""The LPT sections of a scene, parsed once: ``[rig]``, ``[illumination]`` and ``[lpt]``.
+
+:func:`lpt_config` turns the three sections of a checked scene
+(:func:`rimcl.scene.validate.validate_scene`, which checked every key against
+:mod:`rimcl.scene.keys_lpt`) into frozen objects, checking what one key cannot: the
+``[[rig.cameras]]`` tables (their keys: :func:`rimcl.scene.keys_lpt.camera_keys`), the
+lengths of pairs and triples, and the combinations. The defaults of every dataclass here
+are the scene keys' (:mod:`rimcl.scene.keys_lpt`, the one table of names, defaults and
+limits).
+"""
+
+import dataclasses
+
+from rimcl.core.errors import RimclError
+from rimcl.scene.keys import KEYS_BY_NAME
+from rimcl.scene.keys_lpt import CAMERA_SECTION, DEFAULT_PRESET, camera_keys
+from rimcl.scene.validate import check_value, suggest
+
+#: The ``[[rig.cameras]]`` keys by name.
+CAMERA_KEYS = {key.name: key for key in camera_keys()}
+#: The rig presets (``rig.preset``'s choices but "", which asks for the camera tables).
+PRESETS = tuple(choice for choice in KEYS_BY_NAME["rig.preset"].choices if choice)
+
+
+def _tuple(value):
+    return tuple(value) if isinstance(value, list) else value
+
+
+def _default(section, name):
+    """The scene key's default, lists as tuples (frozen dataclasses)."""
+    key = CAMERA_KEYS[name] if section == CAMERA_SECTION else KEYS_BY_NAME[f"{section}.{name}"]
+    return _tuple(key.default)
+
+
+@dataclasses.dataclass(frozen=True)
+class CameraSpec:
+    """One ``[[rig.cameras]]`` table (mm, µm; positions in the field's frame)."""
+
+    position_mm: tuple
+    look_at_mm: tuple
+    focal_length_mm: float = _default(CAMERA_SECTION, "focal_length_mm")
+    f_number: float = _default(CAMERA_SECTION, "f_number")
+    pixel_pitch_um: float = _default(CAMERA_SECTION, "pixel_pitch_um")
+    sensor_pixels: tuple = _default(CAMERA_SECTION, "sensor_pixels")
+    scheimpflug_deg: float = _default(CAMERA_SECTION, "scheimpflug_deg")
+    name: str = _default(CAMERA_SECTION, "name")
+
+
+@dataclasses.dataclass(frozen=True)
+class RigConfig:
+    """``[rig]``: the cameras (or a preset) and the window they share.
+
+    ``preset`` is "" when ``cameras`` holds the ``[[rig.cameras]]`` tables.
+    """
+
+    preset: str = DEFAULT_PRESET
+    cameras: tuple = ()
+    window_thickness_mm: float = _default("rig", "window_thickness_mm")
+    window_index: float = _default("rig", "window_index")
+    outside_index: float = _default("rig", "outside_index")
+    wavelength_nm: float = _default("rig", "wavelength_nm")
+    particle_diameter_um: float = _default("rig", "particle_diameter_um")
+
+
+@dataclasses.dataclass(frozen=True)
+class IlluminationConfig:
+    """``[illumination]``: the seeded volume (field length units).
+
+    ``thickness`` along ``x1`` (None: 0.3 of the field's ``x2`` width, the challenge's
+    30 mm over 100 mm), centred on ``centre`` (None: the field's middle ``x1``);
+    ``extent``: the fractions of the field's ``x2`` and ``x3`` widths seeded, centred;
+    ``ppp``: tracers per pixel of the first camera (None: ``tracers.count``).
+    """
+
+    thickness: float = _default("illumination", "thickness")
+    centre: float = _default("illumination", "centre")
+    extent: tuple = _default("illumination", "extent")
+    ppp: float = _default("illumination", "ppp")
+
+
+@dataclasses.dataclass(frozen=True)
+class LptSettings:
+    """``[lpt]``: rays, calibration, triangulation, images and the ray-tracing engine."""
+
+    ray_tolerance_px: float = _default("lpt", "ray_tolerance_px")
+    max_rays: int = _default("lpt", "max_rays")
+    calibration_planes: int = _default("lpt", "calibration_planes")
+    calibration_grid: tuple = _default("lpt", "calibration_grid")
+    model: str = _default("lpt", "model")
+    engine: str = _default("lpt", "engine")
+    match_tolerances_px: tuple = _default("lpt", "match_tolerances_px")
+    images: bool = _default("lpt", "images")
+    bit_depth: int = _default("lpt", "bit_depth")
+    exposure: float = _default("lpt", "exposure")
+    threshold: float = _default("lpt", "threshold")
+    self_calibration: bool = _default("lpt", "self_calibration")
+    self_calibration_cells: tuple = _default("lpt", "self_calibration_cells")
+    self_calibration_iterations: int = _default("lpt", "self_calibration_iterations")
+
+
+@dataclasses.dataclass(frozen=True)
+class LptConfig:
+    """The LPT sections of a scene.
+
+    Attributes
+    ----------
+    rig : RigConfig
+    illumination : IlluminationConfig
+    settings : LptSettings
+    length_m : float, optional
+        ``field.length_m``: metres per field length unit (None: the field's ``x2`` width is
+        100 mm, the LPT challenge's).
+    """
+
+    rig: RigConfig = RigConfig()
+    illumination: IlluminationConfig = IlluminationConfig()
+    settings: LptSettings = LptSettings()
+    length_m: float = None
+
+
+def _length(values, count, name, where, what):
+    if len(values) != count:
+        raise RimclError(f"{name} in {where} must be {what}, got {list(values)!r}")
+    return tuple(values)
+
+
+def _cameras(tables, where):
+    cameras = []
+    for index, table in enumerate(tables):
+        section = f"{CAMERA_SECTION}[{index}]"
+        values = {}
+        for name, value in table.items():
+            key = CAMERA_KEYS.get(name)
+            if key is None:
+                raise RimclError(
+                    f"unknown key {section}.{name} in {where}" + suggest(name, list(CAMERA_KEYS))
+                )
+            key = dataclasses.replace(key, section=section)  # named with its table's index
+            values[name] = _tuple(check_value(key, value, where))
+        for needed in ("position_mm", "look_at_mm"):
+            if needed not in values:
+                raise RimclError(f"{section} in {where} needs {needed}")
+        if "sensor_pixels" in values:
+            _length(values["sensor_pixels"], 2, f"{section}.sensor_pixels", where, "two numbers")
+        values["name"] = values.get("name") or f"cam{index + 1}"
+        cameras.append(CameraSpec(**values))
+    names = [c.name for c in cameras]
+    if len(set(names)) != len(names):
+        raise RimclError(f"rig.cameras in {where}: camera names must differ, got {names}")
+    return tuple(cameras)
+
+
+def lpt_config(scene, where="the scene"):
+    """The LPT sections of a checked scene (every key present, ``None`` where the
+    pipeline decides), checked together.
+
+    Parameters
+    ----------
+    scene : dict
+        From :func:`rimcl.scene.validate.validate_scene`.
+    where : str
+        Named in error messages.
+
+    Returns
+    -------
+    LptConfig
+    """
+    rig = dict(scene["rig"])
+    cameras = _cameras(rig.pop("cameras") or [], where)
+    if cameras and rig["preset"]:
+        raise RimclError(f"{where}: give rig.preset or [[rig.cameras]], not both")
+    if rig["preset"] == "":
+        raise RimclError(f'{where}: rig.preset = "" needs [[rig.cameras]] tables')
+    rig["preset"] = "" if cameras else rig["preset"] or DEFAULT_PRESET
+    illumination = dict(scene["illumination"])
+    extent = _length(illumination["extent"], 2, "illumination.extent", where, "two fractions")
+    if not all(0 < v <= 1 for v in extent):
+        raise RimclError(f"illumination.extent in {where} must be two fractions in (0, 1]")
+    illumination["extent"] = extent
+    lpt = {name: _tuple(value) for name, value in scene["lpt"].items()}
+    _length(lpt["calibration_grid"], 2, "lpt.calibration_grid", where, "two whole numbers")
+    _length(
+        lpt["self_calibration_cells"],
+        3,
+        "lpt.self_calibration_cells",
+        where,
+        "three whole numbers (x1, x2, x3)",
+    )
+    if not all(v > 0 for v in lpt["match_tolerances_px"]):
+        raise RimclError(f"lpt.match_tolerances_px in {where} must be positive numbers")
+    settings = LptSettings(**lpt)
+    if settings.bit_depth > 16:
+        raise RimclError(f"lpt.bit_depth in {where} must be 8 to 16, got {settings.bit_depth}")
+    for name in ("exposure", "threshold"):
+        if not getattr(settings, name) < 1:
+            raise RimclError(f"lpt.{name} in {where} must be a fraction below 1")
+    if settings.self_calibration and settings.model != "soloff":
+        raise RimclError(
+            f"{where}: lpt.self_calibration corrects Soloff models; set lpt.model = "
+            '"soloff" or lpt.self_calibration = false'
+        )
+    if min(settings.calibration_grid) < 4:
+        raise RimclError(f"lpt.calibration_grid in {where}: at least 4 x 4 points per plane")
+    return LptConfig(
+        RigConfig(cameras=cameras, **rig),
+        IlluminationConfig(**illumination),
+        settings,
+        scene["field"]["length_m"],
+    )
