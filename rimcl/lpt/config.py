@@ -314,6 +314,7 @@ def parse_lpt_scene(raw, where="the scene"):
     -------
     LptScene
     """
+    from rimcl.scene.load import field_scales
     from rimcl.scene.validate import validate_scene
 
     raw = dict(raw)
@@ -326,7 +327,8 @@ def parse_lpt_scene(raw, where="the scene"):
                 f"{', '.join(known)}){_suggest(section, known)}"
             )
     cases_given = "names" in raw.get("cases", {})
-    study = validate_scene(raw, where)
+    # field.time_s from field.velocity_m_s or the field file, as for a study
+    study = field_scales(validate_scene(raw, where), where)
     if not cases_given:
         study["cases"]["names"] = list(DEFAULT_CASES)
     return LptScene(*sections, study)
