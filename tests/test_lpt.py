@@ -243,6 +243,44 @@ def test_scene_keys_are_checked():
     assert scene.study.names == ["C1", "C2", "C3"]
 
 
+def test_lpt_scene_takes_the_time_scale_from_the_velocity_scale():
+    scene = parse_lpt_scene({"field": {"length_m": 0.1, "velocity_m_s": 0.02}})
+    assert scene.study.lpt.time_s == 0.1 / 0.02
+    with pytest.raises(RimclError, match=r"needs field\.length_m"):
+        parse_lpt_scene({"field": {"velocity_m_s": 0.02}})
+
+
+def _case_stats():
+    """A case's statistics as :func:`rimcl.lpt.run.case_statistics` writes them (known rms)."""
+    rms = {"refraction": 2.0, "baseline": 0.5, "refraction_self_calibrated": None}
+    absolute = {k: None if v is None else {"rms": v} for k, v in rms.items()}
+    kinematic = {axis: {"absolute": absolute, "truth_rms": 8.0} for axis in ("x1", "x2", "x3")}
+    position = {axis: {k: absolute[k] for k in rms} for axis in ("x1", "x2", "x3")}
+    return {"pixel_size": 0.01, "fit": {"dt": 0.04}, "position": position,
+            "velocity": kinematic, "acceleration": kinematic}  # fmt: skip
+
+
+def test_lpt_units_are_the_field_values_times_the_scales():
+    from rimcl.lpt.units import case_units
+
+    block = case_units(_case_stats(), depth=1.0, length_m=0.1, time_s=0.5)
+    velocity = block["velocity"]["x3"]
+    assert velocity["rms_refraction"] == {"field": 2.0, "mm_s": 2.0 * (0.1 / 0.5 * 1e3),
+                                          "px_frame": 2.0 * (0.04 / 0.01)}  # fmt: skip
+    assert velocity["rms_truth"]["mm_s"] == 8.0 * (0.1 / 0.5 * 1e3)
+    assert velocity["rms_refraction_self_calibrated"]["mm_s"] is None  # nothing measured
+    assert block["acceleration"]["x1"]["rms_baseline"] == {"field": 0.5, "m_s2": 0.5 * 0.1 / 0.25}
+    assert block["position"]["x2"]["rms_refraction"] == {"field": 2.0, "um": 2.0 * 1e5,
+                                                         "px": 2.0 / 0.01}  # fmt: skip
+    assert block["scales"]["dt_ms"] == 0.04 * 0.5 * 1e3
+    # without a time scale: lengths in µm and px, velocities and accelerations in field units
+    block = case_units(_case_stats(), depth=1.0, length_m=0.1)
+    assert block["velocity"]["x1"]["rms_refraction"]["mm_s"] is None
+    assert block["velocity"]["x1"]["rms_refraction"]["px_frame"] == 2.0 * 4.0
+    assert block["acceleration"]["x1"]["rms_refraction"] == {"field": 2.0, "m_s2": None}
+    assert "set field.time_s" in block["note"]
+
+
 def test_soloff_terms_are_the_monomials():
     from rimcl.lpt.calibration import SOLOFF_EXPONENTS, _soloff_terms
 

@@ -24,7 +24,8 @@ sensor_pixels = [320, 200]
 def test_render_writes_dataset(tmp_path, lpt_flow):
     scene = tmp_path / "scene.toml"
     scene.write_text(
-        f'[field]\npath = "{lpt_flow}"\n[cases]\nnames = ["C3"]\n[tracers]\ncount = 6\n'
+        f'[field]\npath = "{lpt_flow}"\ntime_s = 0.25\n[cases]\nnames = ["C3"]\n'
+        "[tracers]\ncount = 6\n"
         "[time]\nframes = 5\n[lpt]\ncalibration_grid = [6, 5]\n"
         + CAMERA.format(name="left", x2=-300.0)
         + CAMERA.format(name="right", x2=400.0)
@@ -36,6 +37,27 @@ def test_render_writes_dataset(tmp_path, lpt_flow):
     stats = json.loads((out / "lpt_stats.json").read_text())
     case = stats["cases"]["C3"]
     assert case["tracers"] == 6 and len(case["rays"]) == 2
+    # with field.time_s: every rms also in mm/s and m/s², physical = normalised × scale
+    length_m, time_s = stats["length_m"], 0.25
+    assert stats["time_s"] == time_s
+    scales = case["units"]["scales"]
+    assert scales["mm_s_per_velocity"] == length_m / time_s * 1e3
+    assert scales["m_s2_per_acceleration"] == length_m / time_s**2
+    assert scales["dt_ms"] == case["fit"]["dt"] * time_s * 1e3
+    groups = (("velocity", "mm_s", scales["mm_s_per_velocity"]),
+              ("acceleration", "m_s2", scales["m_s2_per_acceleration"]))  # fmt: skip
+    for group, physical, factor in groups:
+        for axis in ("x1", "x2", "x3"):
+            entry = case["units"][group][axis]
+            assert entry["rms_truth"]["field"] == case[group][axis]["truth_rms"]
+            refraction = case[group][axis]["absolute"]["refraction"]["rms"]
+            assert refraction > 0 and entry["rms_refraction"]["field"] == refraction
+            for name in ("rms_truth", "rms_refraction", "rms_baseline"):
+                assert entry[name][physical] == entry[name]["field"] * factor
+    units = case["units"]["position"]["x2"]["rms_refraction"]
+    assert scales["um_per_length"] == length_m * 1e6
+    assert units["um"] == case["position"]["x2"]["refraction"]["rms"] * scales["um_per_length"]
+    assert "refraction rms x1/x2/x3" in result.output and "mm/s" in result.output
     with h5py.File(out / "lpt_case_C3.h5", "r") as h5:
         assert h5.attrs["rimcl_schema"] == "lpt_case"
         truth = h5["tracks/x2_true"][()]
@@ -58,6 +80,12 @@ def test_render_writes_dataset(tmp_path, lpt_flow):
     assert tracks["x2_meas"].attrs["units"] == "L0"
     assert tracks["x2_meas"].attrs["si_per_unit"] == stats["length_m"]
     assert tracks["u3_true"].attrs["units"] == "L0/T0" and tracks["flags"].dims == ("id",)
+    assert tracks["u3_true"].attrs["si_per_unit"] == length_m / time_s
+    assert tracks["a3_true"].attrs["si_per_unit"] == length_m / time_s**2
+    assert tracks["time"].attrs["si_per_unit"] == time_s
+    with h5py.File(path) as h5:
+        assert h5.attrs["time_s"] == time_s
+        assert "m/s each" in json.loads(h5.attrs["units"])["velocity"]
     left = xr.open_dataset(path, group="cameras/left", engine="h5netcdf")
     assert left["centroid_meas"].dims == ("id", "frame", "pixel_axis")
     assert list(left["pixel_axis"].values) == ["column", "row"]
@@ -72,11 +100,11 @@ def test_render_writes_dataset(tmp_path, lpt_flow):
     assert image.dtype == np.uint16 and image.shape == (200, 320) and image.max() > 0
     points = np.loadtxt(folder / "calibration_points.txt")
     assert points.shape == (5 * 6 * 5, 3 + 2 * 2)
-    tracks = np.loadtxt(folder / "truth_tracks.csv", delimiter=",")
-    assert tracks.shape == (30, 12)
+    rows = np.loadtxt(folder / "truth_tracks.csv", delimiter=",")
+    assert rows.shape == (30, 12)
     # the CSV's X (mm) is the field's x2 of the case file, scaled by length_m
     np.testing.assert_allclose(
-        tracks[:6, 3], truth[:, 0] * stats["length_m"] * 1e3, rtol=1e-8, atol=1e-9
+        rows[:6, 3], truth[:, 0] * stats["length_m"] * 1e3, rtol=1e-8, atol=1e-9
     )
     truth_file = xr.open_dataset(folder / "truth_tracks.h5", engine="h5netcdf")
     assert truth_file["position_mm"].dims == ("id", "frame", "axis")
@@ -84,6 +112,18 @@ def test_render_writes_dataset(tmp_path, lpt_flow):
     np.testing.assert_allclose(
         truth_file["position_mm"].sel(axis="X").values, truth * stats["length_m"] * 1e3, rtol=1e-12
     )
+    # truth velocity in m/s and acceleration in m/s²: the case file's (L0/T0) × si_per_unit
+    assert truth_file["velocity"].attrs["units"] == "m/s"
+    assert truth_file["acceleration"].attrs["units"] == "m/s^2"
+    for column, symbol, name in ((6, "u", "velocity"), (9, "a", "acceleration")):
+        true = tracks[f"{symbol}2_true"]  # X = x2
+        np.testing.assert_array_equal(
+            truth_file[name].sel(axis="X").values, true.values * true.attrs["si_per_unit"]
+        )
+        np.testing.assert_allclose(
+            rows[:6, column], true.values[:, 0] * true.attrs["si_per_unit"], rtol=1e-8
+        )
+    assert "velocity in m/s" in (folder / "truth_tracks.csv").read_text().splitlines()[1]
     pinhole = json.loads((folder / "left_pinhole.json").read_text())
     matrix = np.asarray(pinhole["dlt_matrix_mm_to_px"])
     homog = np.hstack([points[:, :3], np.ones((len(points), 1))]) @ matrix.T

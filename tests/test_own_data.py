@@ -84,6 +84,23 @@ def test_cf_temperature_gives_the_index_of_rimcl_media_on_the_right_axes(tank):
         np.testing.assert_allclose(ff.times, [0.0, 0.005])
 
 
+def test_an_imported_field_opens_in_xarray_in_the_inputs_units(tank):
+    """The import records length_m = 1e-3 (mm coordinates) and time_s = 1: xarray gives the
+    depth axis y as x1 in units of 0.001 m, holding the input's millimetres."""
+    xr = pytest.importorskip("xarray")
+    imported, _ = tank
+    with xr.open_dataset(imported, group="frames/0001", engine="h5netcdf") as frame:
+        assert frame["delta_n"].dims == ("x3", "x2", "x1")
+        assert frame["x1"].attrs["units"] == "0.001 m" and frame["time"].attrs["units"] == "1.0 s"
+        np.testing.assert_allclose(frame["x1"], np.linspace(0.0, SIDE_MM, N), rtol=1e-12)
+        assert frame["velocity"].attrs["units"] == "0.001 m/s"
+        # (x1, x2, x3) = (v, u, w) of the input: 0.002, 0.001, 0.003 m/s
+        u = frame["velocity"].isel(x3=0, x2=0, x1=0).values * 1e-3
+        np.testing.assert_allclose(u, [0.002, 0.001, 0.003], rtol=1e-6)
+        with FieldFile(imported) as ff:
+            np.testing.assert_array_equal(frame["delta_n"], ff.delta_n(1)[0])
+
+
 def test_tracer_images_move_the_way_the_gradient_says(tank, device):
     """n falls with height x3 (warmer water above): light bends down, towards higher n, so
     the image of a tracer seen through the depth x1 lies above it (Δx3 > 0), by the slab

@@ -87,6 +87,33 @@ def label_table(group, index=None, units=None, row_name=ROW_DIMENSION):
             dataset.attrs["coordinates"] = " ".join(keys)
 
 
+def si_per_unit(length_m=None, time_s=None):
+    """The SI value (m, s, m/s, m/s²) of one of the units ``L0``, ``T0``, ``L0/T0`` and
+    ``L0/T0^2``, for those the scales give.
+
+    Parameters
+    ----------
+    length_m, time_s : float, optional
+        Metres per field length unit ``L0``, seconds per field time unit ``T0``.
+
+    Returns
+    -------
+    dict of str to float
+    """
+    found = {"L0": length_m, "T0": time_s}
+    if length_m is not None and time_s is not None:
+        found.update({"L0/T0": length_m / time_s, "L0/T0^2": length_m / time_s**2})
+    return {unit: float(value) for unit, value in found.items() if value is not None}
+
+
+def mark_si(group, factors):
+    """Write ``si_per_unit`` on each dataset of ``group`` whose ``units`` is in ``factors``
+    (:func:`si_per_unit`): ``value × si_per_unit`` is then in SI."""
+    for dataset in group.values():
+        if hasattr(dataset, "dtype") and dataset.attrs.get("units") in factors:
+            dataset.attrs["si_per_unit"] = factors[dataset.attrs["units"]]
+
+
 def add_scale(group, name, values, units="1"):
     """A 1-D dataset of ``group`` made a dimension scale of its own name, with units.
 

@@ -18,6 +18,10 @@ Layout (``rimcl_schema = "field"``, ``schema_version = 1``), readable with plain
         or velocity_sheet  (n3, n2, 2) float32, optional, instead of velocity: the in-plane
                            velocity (u2, u3) on the light-sheet plane x1 = const only, at
                            the nodes (x3, x2), with attribute x1 (float64, length units)
+        x1, x2, x3         float64 node coordinates, HDF5 dimension scales of the arrays
+        time               scalar float64, the frame's time; component, sheet_component:
+                           text labels of the vectors' last axis (for xarray; see
+                           :func:`rimcl.fields.field_writer.attach_scales`)
     /frames/0001 ...
 
 Frames are numbered from 0 in time order. A file holds either ``density`` (turned into a

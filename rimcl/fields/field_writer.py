@@ -1,9 +1,14 @@
 """Writing a rimcl field file (:func:`write_field`), atomically and stamped with provenance.
 
-The layout is described in :mod:`rimcl.fields.field_layout`.
+The layout is described in :mod:`rimcl.fields.field_layout`. Every frame group also holds
+HDF5 dimension scales (:func:`attach_scales`: coordinates ``x1``, ``x2``, ``x3``, the frame's
+``time``, the vector ``component``), so that ``xarray.open_dataset(path,
+group="frames/0000", engine="h5netcdf")`` gives named dimensions with units; rimcl's own
+reader ignores them. :func:`label_field_file` adds them to a file written without them.
 """
 
 import json
+import shutil
 from pathlib import Path
 
 import h5py
@@ -11,9 +16,11 @@ import numpy as np
 
 from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
-from rimcl.core.provenance import stamp_h5
+from rimcl.core.provenance import stamp_h5, versions
+from rimcl.core.tables_h5 import add_scale
 from rimcl.fields.field import BOUNDARIES
 from rimcl.fields.field_layout import SCHEMA, SCHEMA_VERSION, SHEET_VELOCITY, check_sheet_x1
+from rimcl.fields.field_reader import FieldFile
 
 
 def _frame_name(index):
@@ -183,6 +190,7 @@ def write_field(
                     _write_array(group, name, frames[k])
             if sheet is not None:
                 _write_array(group, SHEET_VELOCITY, sheet[k]).attrs["x1"] = float(sheet_x1)
+        attach_scales(h5)
     return written
 
 
@@ -218,3 +226,144 @@ def _write_array(group, name, values):
         compression_opts=4,
         shuffle=True,
     )
+
+
+#: Dimensions of a frame's arrays, in the order of their axes.
+_DIMENSIONS = {
+    "density": ("x3", "x2", "x1"),
+    "delta_n": ("x3", "x2", "x1"),
+    "density_gradient": ("x3", "x2", "x1", "component"),
+    "velocity": ("x3", "x2", "x1", "component"),
+    SHEET_VELOCITY: ("x3", "x2", "sheet_component"),
+}
+#: Labels of the vector components (the trailing axis of vectors and of the sheet velocity).
+_COMPONENTS = {"component": ["x1", "x2", "x3"], "sheet_component": ["x2", "x3"]}
+#: Units of the scales' text when the file records no physical scale.
+FIELD_LENGTH_UNITS = "field length units"
+FIELD_TIME_UNITS = "field time units"
+
+
+def _scale_text(value):
+    """A physical scale as the shortest text that reads back as the same float."""
+    return repr(float(value))
+
+
+def unit_texts(length_m=None, time_s=None):
+    """The ``units`` attributes of a field file's coordinates and arrays.
+
+    Parameters
+    ----------
+    length_m, time_s : float, optional
+        Metres per field length unit and seconds per field time unit (the file's root
+        attributes); without them the units are the field's own.
+
+    Returns
+    -------
+    dict of str to str
+        ``length``, ``time``, ``velocity``, ``gradient`` (of the density) and
+        ``dimensionless``: e.g. ``"0.3 m"`` (a value in field units times 0.3 is metres),
+        ``"0.6 m/s"``, else ``"field length units"``.
+    """
+    length = FIELD_LENGTH_UNITS if length_m is None else f"{_scale_text(length_m)} m"
+    time = FIELD_TIME_UNITS if time_s is None else f"{_scale_text(time_s)} s"
+    if length_m is not None and time_s is not None:
+        velocity = f"{_scale_text(length_m / time_s)} m/s"
+    else:
+        velocity = f"({length})/({time})"
+    gradient = f"1/({length})" if length_m is None else f"{_scale_text(1 / length_m)} m^-1"
+    return {
+        "length": length,
+        "time": time,
+        "velocity": velocity,
+        "gradient": gradient,
+        "dimensionless": "1",
+    }
+
+
+def _physical_scale(h5, name):
+    """A positive finite root attribute ``length_m``/``time_s``, else None."""
+    try:
+        value = float(h5.attrs[name])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return value if np.isfinite(value) and value > 0 else None
+
+
+def attach_scales(h5):
+    """Give every frame of an open field file dimension scales and units (for xarray).
+
+    Each frame group gets the coordinates ``x1``, ``x2``, ``x3`` (``origin + i spacing``,
+    float64, length units), a scalar ``time`` (time units, named as a coordinate of the
+    arrays), and ``component`` (``x1, x2, x3``) and ``sheet_component`` (``x2, x3``)
+    labels where a vector is stored; every array gets its dimensions and ``units``. A
+    frame that already holds an ``x1`` is left as it is. The arrays' values are untouched.
+
+    Parameters
+    ----------
+    h5 : h5py.File
+        A field file open for writing, with its ``grid`` and ``frames``.
+    """
+    origin = np.asarray(h5["grid"].attrs["origin"], dtype=np.float64)
+    spacing = np.asarray(h5["grid"].attrs["spacing"], dtype=np.float64)
+    units = unit_texts(_physical_scale(h5, "length_m"), _physical_scale(h5, "time_s"))
+    array_units = {
+        "density": units["dimensionless"],
+        "delta_n": units["dimensionless"],
+        "density_gradient": units["gradient"],
+        "velocity": units["velocity"],
+        SHEET_VELOCITY: units["velocity"],
+    }
+    for group in h5["frames"].values():
+        if "x1" in group:
+            continue
+        arrays = [name for name in _DIMENSIONS if name in group]
+        scalar = group["density" if "density" in group else "delta_n"]
+        n3, n2, n1 = scalar.shape
+        for axis, count in (("x1", n1), ("x2", n2), ("x3", n3)):
+            k = int(axis[1]) - 1
+            add_scale(group, axis, origin[k] + spacing[k] * np.arange(count), units["length"])
+        for name, labels in _COMPONENTS.items():
+            if any(name in _DIMENSIONS[array] for array in arrays):
+                add_scale(group, name, labels)
+        group.create_dataset("time", data=np.float64(group.attrs["time"]))
+        group["time"].attrs["units"] = units["time"]
+        for name in arrays:
+            dataset = group[name]
+            for axis, dimension in enumerate(_DIMENSIONS[name]):
+                dataset.dims[axis].attach_scale(group[dimension])
+            dataset.attrs["units"] = array_units[name]
+            dataset.attrs["coordinates"] = "time"
+
+
+def label_field_file(path):
+    """Add the dimension scales of :func:`attach_scales` to a field file written without
+    them (atomically: a copy is labelled, then renamed onto the file).
+
+    The arrays are not rewritten: their stored bytes, and all that
+    :class:`rimcl.fields.field_reader.FieldFile` reads, stay the same. The root attribute
+    ``dimension_scales`` records when and with which software the scales were added.
+
+    Parameters
+    ----------
+    path : str or Path
+        A rimcl field file.
+
+    Returns
+    -------
+    bool
+        Whether scales were added (False: every frame had them already).
+    """
+    path = Path(path)
+    with FieldFile(path):  # refuses a foreign or damaged file with one line
+        pass
+    with h5py.File(path, "r") as h5:
+        if all("x1" in group for group in h5["frames"].values()):
+            return False
+    with atomic_path(path, overwrite=True) as tmp:
+        shutil.copyfile(path, tmp)
+        with h5py.File(tmp, "r+") as h5:
+            attach_scales(h5)
+            h5.attrs["dimension_scales"] = json.dumps(
+                {"added_by": "rimcl.fields.field_writer.label_field_file", "versions": versions()}
+            )
+    return True

@@ -111,6 +111,7 @@ def parse_lpt_scene(raw, where="the scene"):
     -------
     LptScene
     """
+    from rimcl.scene.load import field_scales
     from rimcl.scene.validate import validate_scene
 
     for section in raw:
@@ -121,7 +122,8 @@ def parse_lpt_scene(raw, where="the scene"):
                 f"{', '.join(known)}){suggest(section, known)}"
             )
     cases_given = "names" in raw.get("cases", {})
-    scene = validate_scene(dict(raw), where)
+    # field.time_s from field.velocity_m_s or the field file, as for a study
+    scene = field_scales(validate_scene(dict(raw), where), where)
     if not cases_given:
         scene["cases"]["names"] = list(DEFAULT_CASES)
     return LptScene(StudyConfig.from_scene(scene, where))

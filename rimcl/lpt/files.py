@@ -4,13 +4,14 @@
 with named dimensions (HDF5 dimension scales) and a ``units`` attribute on every dataset, so that
 ``xarray.open_dataset(path, group="tracks", engine="h5netcdf")`` gives ``(id, frame)`` arrays:
 
-- root attributes: ``case``, ``n_ref``, ``length_m``, ``units`` (JSON), ``config`` and
-  ``versions`` (JSON);
+- root attributes: ``case``, ``n_ref``, ``length_m``, ``time_s`` (where the scene gives a
+  time scale), ``units`` (JSON), ``config`` and ``versions`` (JSON);
 - ``tracks/``: scales ``id (N,)`` and ``frame (F,)``; ``time (frame)``, ``flags (id)`` (1: a
   ray failed, 2: an image off a sensor, 4: an image not located), and per tracer and frame
   ``(id, frame)`` float64: ``x{1,2,3}_{true,meas,ref}``, ``x{1,2,3}_opt_{meas,ref}``
-  (``L0``, field length units; ``si_per_unit`` metres), ``u{1,2,3}_true`` (``L0/T0``),
-  ``a{1,2,3}_true`` (``L0/T0^2``);
+  (``L0``, field length units), ``u{1,2,3}_true`` (``L0/T0``), ``a{1,2,3}_true``
+  (``L0/T0^2``); each with ``si_per_unit`` (metres, m/s, m/s², seconds per unit) where the
+  scales are known (``L0`` always, the others with ``time_s``);
 - ``cameras/<name>/``: scales ``id``, ``frame``, ``pixel_axis`` (``column``, ``row``);
   ``centroid_{meas,ref}``, ``optics_{meas,ref}`` ``(id, frame, pixel_axis)`` (px, pixel
   (0, 0) centred on the top-left pixel), ``disparity_*`` ``(id, frame)`` (px),
@@ -30,10 +31,12 @@ with named dimensions (HDF5 dimension scales) and a ``units`` attribute on every
 - ``cam<k>_pinhole.json``: the fitted DLT matrix (maps ``[X, Y, Z, 1]`` in mm to pixels),
   its residual, and the true camera parameters;
 - ``truth_tracks.csv``: ``track_id, frame, time, X_mm, Y_mm, Z_mm, u, v, w, ax, ay, az``
-  (velocity in m per field time unit, acceleration in m per field time unit squared);
-  ``truth_tracks.h5``: the same as ``(id, frame, axis)`` datasets ``position_mm``,
-  ``velocity``, ``acceleration`` with named dimensions and ``units`` (``m/T0``: metres per
-  field time unit), and ``time (frame)``.
+  (time in field time units; with ``time_s`` velocity in m/s and acceleration in m/s²,
+  without it in m per field time unit and m per field time unit squared; the header says
+  which); ``truth_tracks.h5``: the same as ``(id, frame, axis)`` datasets ``position_mm``,
+  ``velocity``, ``acceleration`` with named dimensions and ``units`` (``m/s``, ``m/s^2``;
+  else ``m/T0``, ``m/T0^2``), and ``time (frame)`` (``T0``, with ``si_per_unit`` seconds
+  where known); root attribute ``time_s``.
 """
 
 import json
@@ -44,7 +47,13 @@ import numpy as np
 
 from rimcl.core.atomic import atomic_path
 from rimcl.core.provenance import stamp_h5, to_json
-from rimcl.core.tables_h5 import TRACER_DIMENSIONS, add_scale, write_variable
+from rimcl.core.tables_h5 import (
+    TRACER_DIMENSIONS,
+    add_scale,
+    mark_si,
+    si_per_unit,
+    write_variable,
+)
 from rimcl.stats.tables import write_json
 
 SCHEMA = "lpt_case"
@@ -57,13 +66,18 @@ XYZ_AXES = (1, 2, 0)
 
 
 def _units(run):
+    names = {"L0": "m", "T0": "s", "L0/T0": "m/s", "L0/T0^2": "m/s^2"}
+    each = {
+        unit: f" ({value:g} {names[unit]} each)"
+        for unit, value in si_per_unit(run.length_m, run.time_s).items()
+    }
     return {
-        "positions": f"field length units ({run.length_m:g} m each)",
-        "velocity": "field length / field time units",
-        "acceleration": "field length / field time units squared",
+        "positions": "field length units" + each["L0"],
+        "velocity": "field length / field time units" + each.get("L0/T0", ""),
+        "acceleration": "field length / field time units squared" + each.get("L0/T0^2", ""),
         "centroids": "pixels (column, row); pixel (0, 0) centred on the top-left pixel",
         "disparity": "pixels",
-        "time": "field time units",
+        "time": "field time units" + each.get("T0", ""),
     }
 
 
@@ -77,6 +91,8 @@ def write_case(path, run, result, scene, overwrite=True):
         h5.attrs["case"] = result["case"]
         h5.attrs["n_ref"] = result["n_ref"]
         h5.attrs["length_m"] = run.length_m
+        if run.time_s is not None:
+            h5.attrs["time_s"] = run.time_s
         h5.attrs["units"] = json.dumps(_units(run))
         stamp_h5(h5, {**describe(scene), "study_scene": scene.study.scene_record()})
         frames, count = run.true.shape[:2]
@@ -93,9 +109,7 @@ def write_case(path, run, result, scene, overwrite=True):
             """Per frame and tracer ``(F, N, ...)`` values written as ``(id, frame, ...)``."""
             values = np.swapaxes(np.asarray(values), 0, 1)
             dimensions = (*TRACER_DIMENSIONS, "pixel_axis")[: values.ndim]
-            dataset = write_variable(group, name, values, dimensions, units)
-            if units == "L0":
-                dataset.attrs["si_per_unit"] = run.length_m
+            write_variable(group, name, values, dimensions, units)
 
         tracks = tracer_group("tracks")
         write_variable(tracks, "time", run.times, ("frame",), "T0")
@@ -138,6 +152,8 @@ def write_case(path, run, result, scene, overwrite=True):
         write_variable(calibration, "target", result["target"], ("point", "axis"), "L0")
         pixels = result["target_pixels"]
         write_variable(calibration, "pixels", pixels, ("camera", "point", "pixel_axis"), "px")
+        for group in (tracks, calibration):
+            mark_si(group, si_per_unit(run.length_m, run.time_s))
         h5.attrs["exposure"] = to_json(result["exposure"])
         h5.attrs["sensor"] = to_json(result["sensor"])
         h5.attrs["mie"] = to_json(result["mie"])
@@ -208,15 +224,25 @@ def write_dataset(out_dir, run, result, scene, overwrite=True):
 
 
 def write_truth_tracks(folder, run, overwrite=True):
-    """``truth_tracks.h5`` and ``.csv``: true positions (mm), velocity (m/s), acceleration
-    (m/s²); ``time_s`` is in field time units unless the field gives seconds."""
+    """``truth_tracks.h5`` and ``.csv``: true positions (mm), velocity and acceleration (m/s
+    and m/s² with the run's ``time_s``, else metres per field time unit and its square);
+    times in field time units."""
     frames, count = run.true.shape[:2]
+    si = si_per_unit(run.length_m, run.time_s)
     ids = np.broadcast_to(np.arange(count), (frames, count))
     frame = np.broadcast_to(np.arange(frames)[:, None], (frames, count))
     times = np.broadcast_to(run.times[:, None], (frames, count))
     position = _to_mm(run.true, run.length_m)
-    velocity = run.u_true[..., XYZ_AXES] * run.length_m
-    acceleration = run.a_true[..., XYZ_AXES] * run.length_m
+    # physical = normalised × the one factor per unit (metres per L0, or m/s per L0/T0, ...)
+    if run.time_s is None:
+        kinematic_units = {"velocity": ("m/T0", "L0"), "acceleration": ("m/T0^2", "L0")}
+        texts = ("m per field time unit", "m per field time unit squared")
+    else:
+        kinematic_units = {"velocity": ("m/s", "L0/T0"), "acceleration": ("m/s^2", "L0/T0^2")}
+        texts = ("m/s", "m/s^2")
+    velocity = run.u_true[..., XYZ_AXES] * si[kinematic_units["velocity"][1]]
+    acceleration = run.a_true[..., XYZ_AXES] * si[kinematic_units["acceleration"][1]]
+    time_text = "field time units" + ("" if run.time_s is None else f" ({run.time_s:g} s each)")
     table = np.column_stack(
         [
             ids.ravel(),
@@ -234,20 +260,17 @@ def write_truth_tracks(folder, run, overwrite=True):
             table,
             delimiter=",",
             fmt=["%d", "%d", "%.9g"] + ["%.9g"] * 9,
-            header=names
-            + "\nvelocity in m per field time unit, acceleration in m per field time unit^2",
+            header=f"{names}\ntime in {time_text}, velocity in {texts[0]}, acceleration in "
+            f"{texts[1]}",
             comments="# ",
         )
     with atomic_path(folder / "truth_tracks.h5", overwrite) as tmp, h5py.File(tmp, "w") as h5:
         h5.attrs["rimcl_schema"] = "lpt_truth_tracks"
         h5.attrs["axes"] = "X, Y, Z = field x2, x3, x1 (mm from the field origin)"
+        if run.time_s is not None:
+            h5.attrs["time_s"] = run.time_s
         h5.attrs["units"] = json.dumps(
-            {
-                "position": "mm",
-                "velocity": "m per field time unit",
-                "acceleration": "m per field time unit squared",
-                "time": "field time units",
-            }
+            {"position": "mm", "velocity": texts[0], "acceleration": texts[1], "time": time_text}
         )
         # named dimensions (id, frame, axis), for xarray.open_dataset(path)
         add_scale(h5, "id", np.arange(count))
@@ -257,7 +280,8 @@ def write_truth_tracks(folder, run, overwrite=True):
         dimensions = (*TRACER_DIMENSIONS, "axis")
         for name, values, units in (
             ("position_mm", position, "mm"),
-            ("velocity", velocity, "m/T0"),
-            ("acceleration", acceleration, "m/T0^2"),
+            ("velocity", velocity, kinematic_units["velocity"][0]),
+            ("acceleration", acceleration, kinematic_units["acceleration"][0]),
         ):
             write_variable(h5, name, np.swapaxes(values, 0, 1), dimensions, units)
+        mark_si(h5, si)

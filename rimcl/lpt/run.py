@@ -20,7 +20,9 @@ For each case of the scene (same tracers, same tracks, common random numbers):
    ``ref - true``, per component.
 
 Units: positions in field length units (``length_m`` metres each), image points in pixels,
-velocities in length/time units, accelerations in length/time² units.
+velocities in length/time units, accelerations in length/time² units; with the scene's time
+scale (``field.time_s``, ``time_s`` seconds per field time unit) each case's ``units`` block
+also gives them in mm/s and m/s² (:mod:`rimcl.lpt.units`).
 """
 
 import dataclasses
@@ -48,12 +50,12 @@ from rimcl.lpt.images import (
 from rimcl.lpt.matching import match_frame
 from rimcl.lpt.rig import RigCamera
 from rimcl.lpt.selfcal import self_calibrate
+from rimcl.lpt.units import COMPONENTS, case_units
 from rimcl.lpt.views import Tracer, choose_ray_count, uniform_field, view
 from rimcl.optics.camera import FlatWindow
 from rimcl.stats.bootstrap import TracerBootstrap
 from rimcl.stats.summaries import error_summary
 
-COMPONENTS = ("x1", "x2", "x3")
 #: Tracers sampled to choose the ray count.
 RAY_SAMPLE = 32
 #: Flag bits of a tracer: a ray that did not reach the exit face, an image off a sensor.
@@ -76,6 +78,8 @@ class Run:
     true : ndarray, shape (F, N, 3)
         True positions.
     u_true, a_true : ndarray, shape (F, N, 3)
+    time_s : float or None
+        Seconds per field time unit, where the scene gives it.
     """
 
     source: object
@@ -85,6 +89,7 @@ class Run:
     true: np.ndarray
     u_true: np.ndarray
     a_true: np.ndarray
+    time_s: float | None = None
 
 
 def prepare(scene, out_dir, timings):
@@ -131,7 +136,9 @@ def prepare(scene, out_dir, timings):
     u_true = track_velocity(velocity, true, moments)
     a_true = track_acceleration(velocity, true, moments)
     timings["tracks"] = time.perf_counter() - started
-    return Run(source, moments, float(length_m), volume, true, u_true, a_true)
+    time_s = scene.study.lpt.time_s
+    time_s = None if time_s is None else float(time_s)
+    return Run(source, moments, float(length_m), volume, true, u_true, a_true, time_s)
 
 
 def rig_cameras(rig, volume, length_m, fluid_index):
@@ -559,38 +566,40 @@ def case_statistics(run, result, scene):
         ("velocity", "velocity", run.u_true),
         ("acceleration", "acceleration", run.a_true),
     ):
-        measured = getattr(fits["meas"], attribute)
         reference = getattr(fits["ref"], attribute)
         truth = true_values[centres][:, keep]
+        errors = {
+            "refraction": getattr(fits["meas"], attribute) - reference,
+            "baseline": reference - truth,
+            "refraction_self_calibrated": getattr(fits["vsc"], attribute) - reference
+            if "vsc" in fits
+            else None,
+        }
         block = {}
         for axis, name in enumerate(COMPONENTS):
             block[name] = {
-                "refraction": error_summary(
-                    (measured - reference)[..., axis].ravel(),
-                    truth[..., axis].ravel(),
-                    fit_ids,
-                    bootstrap,
-                    condition=False,
-                ),
-                "baseline": error_summary(
-                    (reference - truth)[..., axis].ravel(),
-                    truth[..., axis].ravel(),
-                    fit_ids,
-                    bootstrap,
-                    condition=False,
-                ),
-                "refraction_self_calibrated": None
-                if "vsc" not in fits
+                kind: None
+                if error is None
                 else error_summary(
-                    (getattr(fits["vsc"], attribute) - reference)[..., axis].ravel(),
+                    error[..., axis].ravel(),
                     truth[..., axis].ravel(),
                     fit_ids,
                     bootstrap,
                     condition=False,
-                ),
-                # n/a where no tracer was kept (every image lost): nothing was measured
-                "truth_rms": float(np.sqrt(np.mean(truth[..., axis] ** 2))) if truth.size else None,
+                )
+                for kind, error in errors.items()
             }
+            # the errors themselves (field units), for their values in mm/s and m/s²
+            block[name]["absolute"] = {
+                kind: None
+                if error is None
+                else rms_interval(error[..., axis].ravel(), fit_ids, bootstrap)
+                for kind, error in errors.items()
+            }
+            # n/a where no tracer was kept (every image lost): nothing was measured
+            block[name]["truth_rms"] = (
+                float(np.sqrt(np.mean(truth[..., axis] ** 2))) if truth.size else None
+            )
         stats[label] = block
     stats["fit"] = {"window": window, "order": order, "dt": dt}
     return stats
@@ -632,6 +641,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
         "study_scene": scene.study.scene_record(),
         "volume": run.volume.describe(),
         "length_m": run.length_m,
+        "time_s": run.time_s,
         "times": run.times.tolist(),
         "tracers": int(run.true.shape[1]),
         "versions": versions(),
@@ -663,6 +673,8 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
             stats["n_ref"] = result["n_ref"]
             stats["abscissa"] = result["abscissa"]
             stats["timings_s"] = result["timings"]
+            depth = float(run.volume.hi[0] - run.volume.lo[0])
+            stats["units"] = case_units(stats, depth, run.length_m, run.time_s)
             started = time.perf_counter()
             write_case(out_dir / f"lpt_case_{result['case']}.h5", run, result, scene, overwrite)
             if dataset:
@@ -713,6 +725,7 @@ def summary_lines(document):
                     for k in COMPONENTS
                 )
             )
+        lines.append("  " + _physical_line(case.get("units")))
         for kind, label in (("meas", ""), ("vsc", " (self-calibrated)")):
             if kind not in case["disparity"]:
                 continue
@@ -743,3 +756,18 @@ def summary_lines(document):
                 )
             )
     return lines
+
+
+def _physical_line(units):
+    """The refraction errors of velocity and acceleration in mm/s and m/s², or the note
+    that says they are in field units."""
+    if not units or units["scales"]["time_s"] is None:
+        return "velocity and acceleration in field units: set field.time_s for mm/s and m/s²"
+    parts = []
+    for group, key, unit in (("velocity", "mm_s", "mm/s"), ("acceleration", "m_s2", "m/s²")):
+        values = "/".join(_cell(units[group][k]["rms_refraction"][key]) for k in COMPONENTS)
+        parts.append(f"{group} {values} {unit}")
+    return (
+        f"refraction rms x1/x2/x3 (frames {units['scales']['dt_ms']:.4g} ms apart): "
+        + "; ".join(parts)
+    )

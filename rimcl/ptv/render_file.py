@@ -17,7 +17,7 @@ import numpy as np
 from rimcl.core.atomic import atomic_path, check_output
 from rimcl.core.errors import RimclError
 from rimcl.core.provenance import stamp_h5, to_json
-from rimcl.core.tables_h5 import label_table, write_tracer_table
+from rimcl.core.tables_h5 import label_table, mark_si, si_per_unit, write_tracer_table
 
 SCHEMA = "render"
 
@@ -199,11 +199,8 @@ def write_render(path, result, overwrite=False):
     import h5py
 
     path = Path(path)
-    length_m, time_s = result.attrs.get("length_m"), result.attrs.get("time_s")
     # SI value of one unit of a column (m, m/s, m/s², s), where the scales are known
-    si = {"L0": length_m, "T0": time_s}
-    if length_m is not None and time_s is not None:
-        si.update({"L0/T0": length_m / time_s, "L0/T0^2": length_m / time_s**2})
+    si = si_per_unit(result.attrs.get("length_m"), result.attrs.get("time_s"))
     with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
         for name, value in result.attrs.items():
             h5.attrs[name] = value
@@ -222,9 +219,7 @@ def write_render(path, result, overwrite=False):
                 label_table(group, "ray")
             else:
                 write_tracer_table(group, table)
-            for dataset in group.values():
-                if si.get(dataset.attrs.get("units")) is not None:
-                    dataset.attrs["si_per_unit"] = si[dataset.attrs["units"]]
+            mark_si(group, si)
         for name, value in result.ray_attrs.items():
             h5["rays"].attrs[name] = value
     return path

@@ -178,10 +178,10 @@ def load_scene(path=None, overrides=None, preset=None):
         for case in set(preset_thresholds) - set(names):
             if thresholds.get(case) == preset_thresholds[case]:
                 del thresholds[case]
-    return _field_scales(validate_scene(raw, where), where)
+    return field_scales(validate_scene(raw, where), where)
 
 
-def _field_scales(scene, where):
+def field_scales(scene, where):
     """Fill ``field.length_m`` and ``field.time_s`` from ``field.velocity_m_s`` and from
     what the field file records (``rimcl field import`` writes both where its input says)."""
     field = scene["field"]

@@ -110,12 +110,15 @@ class LptConfig:
     length_m : float, optional
         ``field.length_m``: metres per field length unit (None: the field's ``x2`` width is
         100 mm, the LPT challenge's).
+    time_s : float, optional
+        ``field.time_s``: seconds per field time unit (None: outputs in field time units).
     """
 
     rig: RigConfig = RigConfig()
     illumination: IlluminationConfig = IlluminationConfig()
     settings: LptSettings = LptSettings()
     length_m: float = None
+    time_s: float = None
 
 
 def _length(values, count, name, where, what):
@@ -206,4 +209,5 @@ def lpt_config(scene, where="the scene"):
         IlluminationConfig(**illumination),
         settings,
         scene["field"]["length_m"],
+        scene["field"].get("time_s"),
     )

@@ -137,7 +137,7 @@ def case_units(tables, length_m=None, time_s=None, case=None):
     factors = scales(tables.length, tables.pixel_size, tables.dt, length_m, time_s)
     excluded, _ = flagged_tracers(tables)
     kept = np.setdiff1d(np.unique(tables.tracers["id"].astype(np.int64)), excluded)
-    block = {"scales": factors, "note": _note(factors)}
+    block = {"scales": factors, "note": scale_note(factors)}
     if case is not None:
         block["position"] = {}
         for name in ("peak", "median"):
@@ -155,7 +155,8 @@ def case_units(tables, length_m=None, time_s=None, case=None):
     return block
 
 
-def _note(factors):
+def scale_note(factors):
+    """The sentence saying which units a block of :func:`scales` ``factors`` allows."""
     if factors["length_m"] is None:
         return (
             "field units: positions in L and px only; set field.length_m (and field.time_s) "
