@@ -101,3 +101,15 @@ def test_study_runs_lpt(tmp_path, lpt_flow):
     again = CliRunner().invoke(cli, ["study", str(scene), "--out", str(out)])
     assert again.exit_code == 0, again.output
     assert "finished earlier, kept" in again.output
+
+
+@pytest.mark.parametrize("mode", ["lpt", "piv"])
+def test_sensitivity_where_no_ptv_case_runs_is_refused(tmp_path, mode):
+    """The sensitivity variants re-measure PTV cases: asked for in a mode without any, the
+    study refuses in one line before writing, instead of silently measuring none."""
+    from rimcl.study.run import run_study
+
+    scene = load_scene(None, {"run.mode": mode, "run.sensitivity": True})
+    with pytest.raises(RimclError, match=f'run.mode = "{mode}" has none'):
+        run_study(scene, tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -364,6 +364,12 @@ def run_study(
     mode = study.run.mode
     all_cases = study_cases(study)
     cases = all_cases if mode in ("ptv", "both") else []
+    if study.run.sensitivity and mode in ("piv", "lpt"):
+        # the variants re-measure PTV cases: asked for where none run, say so, not nothing
+        raise RimclError(
+            f'run.sensitivity measures the PTV cases again; run.mode = "{mode}" has none '
+            '(use run.mode = "ptv" or "both", or drop run.sensitivity)'
+        )
     if mode != "lpt":  # the LPT stage checks its own rig and flow
         _check_resources(study)
     _check_no_links(out_dir)
