@@ -11,7 +11,9 @@ device and only per-tracer rows (and the small ray sample) come back:
    them to the sheet (a lens: to its focus plane) and applies the camera's collection
    test in float64 as the host does, and keeps each ray's image point in pixels;
 2. ``cl/image.cl`` renders, digitises and locates each tracer's image
-   (:mod:`rimcl.imaging.device`).
+   (:mod:`rimcl.imaging.device`), then again at each variant threshold of
+   :data:`rimcl.imaging.frames.THRESHOLD_VARIANTS` from the rays still on the device (the
+   same images: the fan kernel does not run again).
 
 The image points and windows are computed with the NumPy engine's float64 operations; the
 renders differ only by the summation order of float64 sums (about 1e-16 of a pixel's
@@ -142,7 +144,7 @@ class _Batch:
     host: dict
     events: list
     fan_event: object
-    image_event: object
+    image_events: list
     sample_rays: np.ndarray = None
 
 
@@ -500,6 +502,7 @@ class DeviceEngine:
         return {
             "tracers": np.empty((self.batch, 2), dtype=np.float64),
             **dict(zip(("rows_l", "rows_d"), self.imager.empty_rows(self.batch), strict=True)),
+            "variants": self.imager.variant_rows(self.batch),
         }
 
     def _launch(
@@ -553,7 +556,12 @@ class DeviceEngine:
             self.ray_buffers, count, weight_arg, scales, canvas, noise
         )
         events += self.imager.enqueue_read(host["rows_l"][:count], host["rows_d"][:count])
-        return _Batch(ids, host, events, fan_event, image_event, sample_rays)
+        # the variant thresholds: the image kernel again on the rays already here
+        reads, variant_events = self.imager.enqueue_variants(
+            self.ray_buffers, count, weight_arg, scales, noise, host["variants"]
+        )
+        events += reads
+        return _Batch(ids, host, events, fan_event, [image_event, *variant_events], sample_rays)
 
     def _collect(self, job, context):
         import pyopencl as cl
@@ -562,7 +570,9 @@ class DeviceEngine:
         count = len(job.ids)
         rows_l, rows_d = job.host["rows_l"][:count], job.host["rows_d"][:count]
         scales, pass_, timings = context.scales, context.pass_, context.setup.timings
-        columns = self.imager.columns(rows_l, rows_d, None if scales is None else scales[job.ids])
+        batch_scales = None if scales is None else scales[job.ids]
+        columns = self.imager.columns(rows_l, rows_d, batch_scales)
+        self.imager.add_variants(columns, job.host["variants"], batch_scales)
         for name, values in columns.items():
             pass_.images[name][context.frame, job.ids] = values
         status_counts, vignetted, steps = self.imager.ray_totals(rows_l)
@@ -570,7 +580,7 @@ class DeviceEngine:
         pass_.vignetted += vignetted
         pass_.ray_steps += steps
         timings["trace"] += event_seconds(job.fan_event)
-        timings["render"] += event_seconds(job.image_event)
+        timings["render"] += sum(event_seconds(event) for event in job.image_events)
         if job.sample_rays is not None and len(job.sample_rays):
             started = time.thread_time()
             self._take_sample(job, context)

@@ -41,10 +41,11 @@ def run_keys():
             "sensitivity",
             False,
             "bool",
-            "measure every case again with the threshold halved and doubled, the other "
-            "interpolation and 4 times the rays (4 studies more): the sensitivity band of "
-            "each headline number in summary.md (without it: only the excluded tracers "
-            "counted by their optics error)",
+            "measure every case again with the other interpolation and 4 times the rays "
+            "(2 studies more): their part of the sensitivity band of each headline number "
+            "in summary.md (without it the band holds the threshold halved and doubled, "
+            "located in the same images, and the excluded tracers counted by their optics "
+            "error)",
         ),
         SceneKey(
             "run",

@@ -12,6 +12,7 @@ import math
 from datetime import datetime, timezone
 
 from rimcl import __version__
+from rimcl.stats.sensitivity import FILE_VARIANTS, MEASURED_VARIANTS, THRESHOLD_NAMES
 from rimcl.stats.summaries import INFLUENCE_LIMIT
 from rimcl.study.answer import answer_lines, lens_lines, scene_warnings, warning_lines
 
@@ -269,39 +270,61 @@ def _sensitivity_cell(band, path):
     return f"{text}: **{band['text']}**" if band["text"] != "n/a" else text
 
 
+def _kept_cell(case):
+    """Tracers kept at the threshold ×½, ×1 and ×2 (n/a where the file lacks a variant)."""
+    variants = case["sensitivity"]["variants"]
+    counts = [variants.get(name, {}).get("n_used") for name in THRESHOLD_NAMES]
+    counts.insert(1, case["n_used"])
+    return " / ".join("n/a" if n is None else str(n) for n in counts)
+
+
 def _sensitivity_lines(cases, study):
     """Each headline number with its verdict against the settings' variants."""
     with_bands = [case for case in cases if "sensitivity" in case]
     if not with_bands:
         return []
-    ran = sorted({name for case in with_bands for name in case["sensitivity"]["variants"]})
+    ran = [
+        name
+        for name in (*FILE_VARIANTS, *MEASURED_VARIANTS)
+        if any(name in case["sensitivity"]["variants"] for case in with_bands)
+    ]
+    not_run = [name for name in MEASURED_VARIANTS if name not in ran]
     lines = [
         "## Sensitivity to settings",
         "",
         "The bootstrap interval says how a number moves with the tracers; the settings a "
-        "user chooses move it too. Each headline number (refraction errors) under: "
+        "user chooses move it too. Each headline number (refraction errors) is computed "
+        "again under: "
         + ", ".join(f"*{name}*" for name in ran)
-        + ". **stable**: every variant inside the 95 % interval (*stable against X*: only "
-        "X was tried); otherwise *depends on X by Y %* names the variant that moves it "
-        "most. *excluded by optics*: the tracers left out (flagged) counted with their "
-        "optics error. ",
+        + ". **stable**: every one of these inside the 95 % interval; otherwise *depends "
+        "on X by Y %* names the variant that moves it most. *excluded by optics*: the "
+        "tracers left out (flagged) counted with their optics error; *threshold ×½* and "
+        "*×2*: every tracer located again at that threshold in the same digitised images "
+        "(reference and measured; no tracing again), with its own exclusions. ",
     ]
-    if not study.run.sensitivity:
+    if not_run:
         lines[-1] += (
-            "The threshold ×½ and ×2, the other interpolation and rays ×4 need the case "
-            "measured again (4 studies more): `rimcl study --sensitivity`."
+            "The band does not include "
+            + " and ".join(f"*{name}*" for name in not_run)
+            + f", which need each case measured again ({len(not_run)} studies more): "
+            "`rimcl study --sensitivity`."
         )
     else:
         lines[-1] += (
-            "Threshold ×½ and ×2, the other interpolation (trilinear ↔ bspline3) and rays "
-            "×4: each case measured again (`sensitivity/<variant>/cases/<case>.h5`); "
-            "`stats.json`: `sensitivity` per case."
+            "The other interpolation (trilinear ↔ bspline3) and rays ×4: each case measured "
+            "again (`sensitivity/<variant>/cases/<case>.h5`)."
         )
+    lines[-1] += " `stats.json`: `sensitivity` per case."
     lines.append("")
-    header = ["case", *(heading for _, heading in SENSITIVITY_HEADINGS)]
+    header = [
+        "case",
+        "tracers kept (threshold ×½ / ×1 / ×2)",
+        *(heading for _, heading in SENSITIVITY_HEADINGS),
+    ]
     rows = [
         [
             case["name"],
+            _kept_cell(case),
             *(
                 _sensitivity_cell(case["sensitivity"]["bands"].get(path), path)
                 for path, _ in SENSITIVITY_HEADINGS
