@@ -51,6 +51,8 @@ def _config(engine, device, window_mm, fluid_index, **options):
         ("C1", 5.0, 1.0, {"renderer": "paper", "bit_depth": 10}),
         ("C3", 3.0, 1.335, {"renderer": "exact", "bit_depth": 16}),
         ("C3", 5.0, 1.0, {"renderer": "paper", "bit_depth": 16, "centroid_weights": "grey"}),
+        # the rays aimed through a strong field (rimcl.optics.aiming): the same aim on both
+        ("C4", 10.0, 1.335, {"renderer": "exact", "bit_depth": 12, "threshold": 200.0}),
     ],
 )
 def test_lens_measurement_matches_the_numpy_engine(device, case, window_mm, fluid_index, options):
@@ -63,7 +65,7 @@ def test_lens_measurement_matches_the_numpy_engine(device, case, window_mm, flui
     assert device_result.config["engine"] == "device"
     assert numpy_result.attrs["camera"] == "lens"
     assert_engines_agree(numpy_result, device_result)
-    if case == "C3":  # the stronger field deflects rays past the pupil
+    if case == "C4":  # aimed through the strong field, the rim of the cone misses the pupil
         assert np.bitwise_or.reduce(numpy_result.tracers["flags_meas"]) & TracerFlag.RAYS_VIGNETTED
         assert not numpy_result.rays["collected"].all()
 

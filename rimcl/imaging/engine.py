@@ -134,6 +134,7 @@ class _Frame:
     positions: np.ndarray
     field: object
     plan: object
+    aim_from: np.ndarray
 
 
 @dataclasses.dataclass
@@ -380,7 +381,8 @@ class DeviceEngine:
         context = context_for(device)
         size = self.batch * self.rays
         rw = cl.mem_flags.READ_WRITE
-        self.tracers = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.batch * 16)
+        # (x2, x3) of each tracer and the point its rays are aimed from (cl/fan.cl)
+        self.tracers = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.batch * 32)
         self.ray_buffers = (
             cl.Buffer(context, rw, size=size * 16),
             cl.Buffer(context, rw, size=size * 4),
@@ -420,7 +422,8 @@ class DeviceEngine:
         n_rays = len(positions) * self.rays
         out = np.empty((len(positions), self.rays, 3), dtype=np.float64)
         directions = cl.Buffer(self.queue.context, cl.mem_flags.WRITE_ONLY, size=out.nbytes)
-        cl.enqueue_copy(self.queue, self.tracers, positions)
+        # each tracer aimed from itself (cl/fan.cl's layout: position, then aim origin)
+        cl.enqueue_copy(self.queue, self.tracers, np.concatenate([positions, positions], axis=1))
         kernel.set_args(
             self.tracers,
             self.fan.aims,
@@ -448,20 +451,33 @@ class DeviceEngine:
         return self.sample_buffers
 
     def image_frame(
-        self, setup, pass_, frame, field, positions, scales=None, extras=None, weights=1.0
+        self,
+        setup,
+        pass_,
+        frame,
+        field,
+        positions,
+        scales=None,
+        extras=None,
+        weights=1.0,
+        aim_from=None,
     ):
         """Trace, render and locate every tracer of one frame on the device.
 
         The device counterpart of the NumPy path of ``rimcl.ptv.imaging_passes._image_frame``, with
         the same parameters, plus ``weights``: light per ray, a number, ``(K,)`` (the same
         fan weights for every tracer, as Mie weights of the initial directions) or
-        ``(N, K)``.
+        ``(N, K)``; ``aim_from``: ``(N, 2)``, the points the tracers' rays are aimed from
+        (:func:`rimcl.optics.aiming.aim_origins`; default the tracers themselves).
         """
         started = time.thread_time()
         extras = extras or {}
         sampler, canvas, bar = extras.get("sampler"), extras.get("canvas"), extras.get("bar")
         kernel, launch, plan = self.fan.kernel(field, setup.trace_options, positions)
-        context = _Frame(setup, pass_, frame, scales, sampler, bar, positions, field, plan)
+        aim_from = positions if aim_from is None else aim_from
+        context = _Frame(
+            setup, pass_, frame, scales, sampler, bar, positions, field, plan, aim_from
+        )
         if canvas is not None:
             self.imager.use_canvas(canvas.counts.shape)
         per_tracer_weights = np.ndim(weights) == 2
@@ -477,6 +493,7 @@ class DeviceEngine:
                 ids,
                 host,
                 positions,
+                aim_from,
                 None if scales is None else scales[ids],
                 weights[ids] if per_tracer_weights else shared,
                 sampler,
@@ -500,20 +517,32 @@ class DeviceEngine:
 
     def _host_arrays(self):
         return {
-            "tracers": np.empty((self.batch, 2), dtype=np.float64),
+            "tracers": np.empty((self.batch, 4), dtype=np.float64),
             **dict(zip(("rows_l", "rows_d"), self.imager.empty_rows(self.batch), strict=True)),
             "variants": self.imager.variant_rows(self.batch),
         }
 
     def _launch(
-        self, kernel, launch, ids, host, positions, scales, weights, sampler, canvas, noise
+        self,
+        kernel,
+        launch,
+        ids,
+        host,
+        positions,
+        aim_from,
+        scales,
+        weights,
+        sampler,
+        canvas,
+        noise,
     ):
         import pyopencl as cl
 
         count = len(ids)
         n_rays = count * self.rays
         tracers = host["tracers"][:count]
-        tracers[...] = positions[ids]
+        tracers[:, :2] = positions[ids]
+        tracers[:, 2:] = aim_from[ids]
         cl.enqueue_copy(self.queue, self.tracers, tracers, is_blocking=False)
         sample_rays = None
         sample_args = (self.tracers, np.int32(0), self.tracers, self.tracers)
@@ -595,7 +624,7 @@ class DeviceEngine:
         local = job.sample_rays.astype(np.int64)
         positions, field = context.positions, context.field
         tracer = job.ids[local // self.rays]
-        directions = self.camera.directions(positions[tracer], local % self.rays)
+        directions = self.camera.directions(context.aim_from[tracer], local % self.rays)
         origins = self.scene.in_sheet(positions[tracer])
         if field.is_uniform:
             limit = self.fan.straight_args[1]
