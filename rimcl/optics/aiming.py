@@ -30,6 +30,8 @@ AIM_ITERATIONS = 12
 JACOBIAN_STEP = 0.1
 #: Longest Newton step, in pupil radii.
 MAX_STEP = 8.0
+#: A chief ray this close to the pupil centre (in pupil radii) is aimed: its tracer stops.
+AIM_TOLERANCE = 1e-7
 
 
 def chief_misses(camera, field, positions, origins, trace_options):
@@ -74,7 +76,7 @@ def aim_origins(camera, field, positions, trace_options, iterations=AIM_ITERATIO
     trace_options : dict
         ``step``, ``interp``, ``precision`` and ``device`` of :func:`rimcl.trace_rays`.
     iterations : int
-        Newton steps.
+        Newton steps at most (each tracer stops once within :data:`AIM_TOLERANCE`).
 
     Returns
     -------
@@ -86,16 +88,19 @@ def aim_origins(camera, field, positions, trace_options, iterations=AIM_ITERATIO
     uniform = getattr(field, "is_uniform", False)  # an analytic field is never skipped
     if not isinstance(camera, LensCamera) or uniform or not len(positions):
         return positions
-    count = len(positions)
-    step = JACOBIAN_STEP * 0.5 * camera.pupil.diameter
+    radius = 0.5 * camera.pupil.diameter
+    step = JACOBIAN_STEP * radius
     probes = np.array([[0.0, 0.0], [step, 0.0], [0.0, step]])
-    tripled = np.repeat(positions, 3, axis=0)
     shift = np.zeros_like(positions)
-    best, best_size = shift.copy(), np.full(count, np.inf)
+    best, best_size = shift.copy(), np.full(len(positions), np.inf)
+    # every tracer is traced each step (a fixed number of rays: PoCL compiles its work-group
+    # function per launch shape, and a shrinking set cost seconds a step); those already
+    # within tolerance keep their shift, and the steps stop once all are
+    tripled = np.repeat(positions, 3, axis=0)
     for _ in range(int(iterations)):
         shifts = (shift[:, None, :] + probes[None]).reshape(-1, 2)
         miss = chief_misses(camera, field, tripled, tripled - shifts, trace_options)
-        miss = miss.reshape(count, 3, 2)
+        miss = miss.reshape(len(positions), 3, 2)
         size = np.hypot(*miss[:, 0].T)
         better = size < best_size
         best[better], best_size[better] = shift[better], size[better]
@@ -107,8 +112,12 @@ def aim_origins(camera, field, positions, trace_options, iterations=AIM_ITERATIO
             newton[usable] = -np.linalg.solve(jacobian[usable], miss[usable, 0][..., None])[..., 0]
         # at most MAX_STEP pupil radii a step (a nearly singular Jacobian near a caustic)
         length = np.hypot(*newton.T)[:, None]
-        limit = MAX_STEP * 0.5 * camera.pupil.diameter
+        limit = MAX_STEP * radius
         newton = np.where(length > limit, newton * (limit / np.maximum(length, limit)), newton)
         # from the best shift so far: a step that made the miss larger is not continued
         shift = best + np.where(better[:, None], newton, 0.5 * (shift - best))
+        done = best_size <= AIM_TOLERANCE * radius
+        shift[done] = best[done]
+        if done.all():
+            break
     return positions - best
