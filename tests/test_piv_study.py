@@ -226,3 +226,39 @@ def test_a_lens_is_focused_in_each_cases_index_with_a_reference_of_its_own(devic
     again = run_piv_case(case="C4", piv=piv, reference=[c0.reference, c4.reference], **configs)
     assert again.reference is c4.reference
     np.testing.assert_array_equal(again.vectors["dx_field"], c4.vectors["dx_field"])
+
+
+def test_the_summary_sets_ptv_and_piv_settings_side_by_side(both):
+    """The tiny study's PIV frames differ from its PTV images in Δt, pixel and rays: the
+    summary says so beside the verdict, with both values of each."""
+    out, result, _ = both
+    settings = result.stats["cases"][0]["piv_vs_ptv"]["settings"]
+    assert settings["ptv"]["dt"] == result.stats["cases"][0]["dt"]
+    assert settings["piv"]["dt"] == pytest.approx(0.1)
+    assert settings["ptv"]["rays_per_tracer"] == 16 and settings["piv"]["rays_per_tracer"] == 4
+    assert settings["ptv"]["bit_depth"] == 12 and settings["piv"]["bit_depth"] == 16
+    assert settings["differ"] == ["dt", "pixel_size_over_L", "rays_per_tracer", "bit_depth"]
+    assert not settings["like_for_like"]
+    summary = (out / "summary.md").read_text()
+    assert "| rays per tracer | 16 | 4 |" in summary
+    assert "**Not like for like**: PTV and PIV differ in Δt, pixel on the sheet / L, rays" in (
+        summary
+    )
+
+
+def test_like_for_like_settings_are_named_so(device):
+    """The same Δt, camera, pixel, rays and bits: like for like."""
+    from rimcl.piv.comparison import side_by_side
+
+    scene = tiny_scene(
+        device,
+        **{"piv.dt": 0.02, "piv.rays": 16, "piv.bit_depth": 12, "renderer.pixels": 64},
+    )
+    study = StudyConfig.from_scene(scene)
+    pixel = 1 / 64
+    ptv_case = {"dt": 0.02, "pixel_size_over_L": pixel}
+    settings = side_by_side(study, ptv_case, {"dt": 0.02, "pixel_size_over_L": pixel})
+    assert settings["like_for_like"] and settings["differ"] == []
+    assert settings["ptv"] == settings["piv"]
+    longer = side_by_side(study, ptv_case, {"dt": 0.1, "pixel_size_over_L": pixel})
+    assert longer["differ"] == ["dt"]

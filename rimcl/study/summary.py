@@ -12,6 +12,7 @@ import math
 from datetime import datetime, timezone
 
 from rimcl import __version__
+from rimcl.piv.comparison import COMPARED
 from rimcl.stats.sensitivity import FILE_VARIANTS, MEASURED_VARIANTS, THRESHOLD_NAMES
 from rimcl.stats.summaries import INFLUENCE_LIMIT
 from rimcl.study.answer import answer_lines, lens_lines, scene_warnings, warning_lines
@@ -683,4 +684,46 @@ def piv_lines(stats):
                 number(compared.get("optics_ratio_rms_normalized")),
             ]
         )
-    return [*lines, *_table(header, rows), "", piv_verdict(stats), ""]
+    return [
+        *lines,
+        *_table(header, rows),
+        "",
+        *_settings_lines(cases),
+        piv_verdict(stats),
+        "",
+    ]
+
+
+def _settings_lines(cases):
+    """PTV's and PIV's settings side by side, and whether the ratios compare like for like."""
+    settings = next(
+        (c["piv_vs_ptv"]["settings"] for c in cases if "settings" in c.get("piv_vs_ptv", {})),
+        None,
+    )
+    if settings is None:
+        return []
+    rows = [
+        [name, _setting(settings["ptv"][key]), _setting(settings["piv"][key])]
+        for key, name in COMPARED
+    ]
+    names = dict(COMPARED)
+    if settings["like_for_like"]:
+        verdict = (
+            "PTV and PIV measured **like for like**: the same Δt, camera, pixel, rays and bits."
+        )
+    else:
+        differ = ", ".join(names[key] for key in settings["differ"])
+        verdict = (
+            f"**Not like for like**: PTV and PIV differ in {differ}, so the ratios compare "
+            "the two measurements as set up, not the two methods (a velocity error from a "
+            "position error scales as 1/Δt). Set `[piv]` `dt`, `rays` and `bit_depth` to "
+            "PTV's (`time.dt`, the camera's rays, `renderer.bit_depth`) to compare the "
+            "methods."
+        )
+    return [*_table(["setting", "PTV", "PIV"], rows), "", verdict, ""]
+
+
+def _setting(value):
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return number(value) if isinstance(value, float) else str(value)
