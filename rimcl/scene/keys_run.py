@@ -33,8 +33,9 @@ def run_keys():
             "numerics",
             True,
             "bool",
-            "with the figures, the paper's Appendix A check: one case (C1) at half the step "
-            "and on every second grid node, its |ε_x| PDFs in figures/numerics.png",
+            "with the figures, the paper's Appendix A check: one case (C1) at a half and a "
+            "quarter of the step and on every second and fourth grid node, its |ε_x| PDFs "
+            "and Richardson's estimate of a finer step and grid in figures/numerics.png",
         ),
         SceneKey(
             "run",
