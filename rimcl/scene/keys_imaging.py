@@ -85,10 +85,12 @@ def imaging_keys():
         SceneKey(
             "time",
             "dt_multiples",
-            [1, 2],
+            None,
             "ints",
             "the Δt sweep: the paper's differences also over every m-th imaged frame, for "
-            "each m listed (Δt = m time.dt)",
+            "each m listed (Δt = m time.dt); default: every m from 1 to time.frames - 1 "
+            "(5 frames: Δt, 2Δt, 3Δt, 4Δt; accelerations where 2m + 1 frames fit)",
+            example=[1, 2],
         ),
         SceneKey(
             "cases",
