@@ -147,18 +147,27 @@ def _case_row(case, block=None):
         number(case["G"]),
         number(case["delta_n_max"]),
         f"{case['n_used']}/{case['n_tracers']}",
-        _marked(
-            case,
-            "position_error_peak_over_L",
-            with_interval(
-                case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
-            ),
-        ),
+        _peak_cell(case),
         _ratio_cell(case, f"{prefix}velocity.u3.systematic", velocity, "systematic"),
         _ratio_cell(case, f"{prefix}velocity.u3.random", velocity, "random"),
         _ratio_cell(case, f"{prefix}acceleration.a3.systematic", acceleration, "systematic"),
         _ratio_cell(case, f"{prefix}acceleration.a3.random", acceleration, "random"),
     ]
+
+
+def _peak_cell(case):
+    """The PDF peak of ``|ε_x|/L`` with its interval; where two modes compete, both, said."""
+    text = _marked(
+        case,
+        "position_error_peak_over_L",
+        with_interval(
+            case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
+        ),
+    )
+    if case.get("position_error_peak_ambiguous"):
+        modes = " and ".join(number(m) for m in case["position_error_modes_over_L"])
+        text += f" (two modes, {modes}: no one peak; read the median)"
+    return text
 
 
 def _headline_rows(cases, group, component):
@@ -455,14 +464,7 @@ def summary_markdown(stats, study):
             number(case["G"]),
             number(case["delta_n_max"]),
             f"{case['n_used']}/{case['n_tracers']}",
-            _marked(
-                case,
-                "position_error_peak_over_L",
-                with_interval(
-                    case["position_error_peak_over_L"],
-                    case.get("position_error_peak_over_L_ci95"),
-                ),
-            ),
+            _peak_cell(case),
             _marked(
                 case,
                 "position_error_median_over_L",
