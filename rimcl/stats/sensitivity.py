@@ -42,6 +42,9 @@ EXCLUDED_BY_OPTICS = "excluded by optics"
 THRESHOLD_NAMES = dict(zip(("threshold ×½", "threshold ×2"), THRESHOLD_SUFFIXES, strict=True))
 #: The variants every study computes from the case's file.
 FILE_VARIANTS = (EXCLUDED_BY_OPTICS, *THRESHOLD_NAMES)
+#: A move below this (percent of the number) reads plain "stable"; a larger one inside the
+#: interval is named beside it.
+STILL_PERCENT = 0.5
 #: The variants that measure the case again (:mod:`rimcl.study.sensitivity`).
 MEASURED_VARIANTS = ("the other interpolation", "rays ×4")
 
@@ -169,7 +172,9 @@ def bands(case, variants):
         ``relative`` (``{name: value / headline - 1}``), ``stable`` (every variant inside
         the interval; None without variants or value), ``not_run`` (the
         :data:`MEASURED_VARIANTS` not measured: the band does not include them) and
-        ``text`` ("stable"; "depends on X by +Y %"; or "n/a").
+        ``text`` ("stable" where no variant moves it by :data:`STILL_PERCENT`; "stable
+        (X: +Y %)" naming the largest move inside the interval; "depends on X by +Y %";
+        or "n/a").
     """
     result = {}
     for path, _, _ in HEADLINES:
@@ -187,10 +192,13 @@ def bands(case, variants):
             interval[0] <= v <= interval[1] for v in found.values()
         )
         entry["stable"] = bool(inside)
-        if inside:
+        name = max(entry["relative"], key=lambda k: abs(entry["relative"][k]))
+        move = 100 * entry["relative"][name]
+        if not inside:
+            entry["text"] = f"depends on {name} by {move:+.0f} %"
+        elif abs(move) < STILL_PERCENT:
             entry["text"] = "stable"
-        else:
-            name = max(entry["relative"], key=lambda k: abs(entry["relative"][k]))
-            entry["text"] = f"depends on {name} by {100 * entry['relative'][name]:+.0f} %"
+        else:  # inside the interval, but how far the settings move it still shows
+            entry["text"] = f"stable ({name}: {move:+.0f} %)"
         result[path] = entry
     return result

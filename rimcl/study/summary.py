@@ -306,8 +306,9 @@ def _sensitivity_lines(cases, study):
         "user chooses move it too. Each headline number (refraction errors) is computed "
         "again under: "
         + ", ".join(f"*{name}*" for name in ran)
-        + ". **stable**: every one of these inside the 95 % interval; otherwise *depends "
-        "on X by Y %* names the variant that moves it most. *excluded by optics*: the "
+        + ". **stable**: every one of these inside the 95 % interval (the largest move "
+        "beside it where one moves it by 0.5 % or more); otherwise *depends on X by Y %* "
+        "names the variant that moves it most. *excluded by optics*: the "
         "tracers left out (flagged) counted with their optics error; *threshold ×½* and "
         "*×2*: every tracer located again at that threshold in the same digitised images "
         "(reference and measured; no tracing again), with its own exclusions. ",
