@@ -47,8 +47,9 @@
  * Work-item: RIMCL_LANES consecutive slots of the batch; fan_directions: one ray.
  * Global size: ceil(n_rays / RIMCL_LANES) (extra items return); fan_directions: n_rays.
  *
- * tracers (B x 2 doubles, or B x 3 with RIMCL_TRACER_DEPTH): tracer positions (x2, x3) on
- *   the sheet, or (x1, x2, x3).
+ * tracers (B x 4 doubles, or B x 3 with RIMCL_TRACER_DEPTH): tracer positions (x2, x3) on
+ *   the sheet and the point (x2, x3) its rays are aimed from (the tracer, or the tracer
+ *   minus its aim shift: rimcl/optics/aiming.py), or (x1, x2, x3) aimed from themselves.
  * aims    (K x 3 doubles): the camera's aim points (x1, x2, x3) (a lens: its pupil's).
  * order   (K ints): a permutation of the aim points, the order their rays fill lanes in.
  * camera  (CAM_COUNT doubles, offsets CAM_* below; the CAM_WINDOW_* ones only for 2).
@@ -111,8 +112,24 @@ RIMCL_INLINE void tracer_start(__global const double *tracers, const int t, cons
         start[q] = tracers[3 * t + q];
 #else
     start[0] = x_sheet;
-    start[1] = tracers[2 * t];
-    start[2] = tracers[2 * t + 1];
+    start[1] = tracers[4 * t];
+    start[2] = tracers[4 * t + 1];
+#endif
+}
+
+/* The point (x1, x2, x3) tracer t's rays are aimed from (the camera's directions() of it). */
+RIMCL_INLINE void aim_start(__global const double *tracers, const int t, const double *start,
+                            double *from)
+{
+#if RIMCL_TRACER_DEPTH
+    (void)tracers;
+    (void)t;
+    for (int q = 0; q < 3; ++q)
+        from[q] = start[q];
+#else
+    from[0] = start[0];
+    from[1] = tracers[4 * t + 2];
+    from[2] = tracers[4 * t + 3];
 #endif
 }
 
@@ -263,8 +280,9 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
         double start[3];
         tracer_start(tracers, tracer, x_sheet, start);
         lane_x1[k] = start[0];
-        double d[3];
-        camera_direction(camera, start, aim, d);
+        double from[3], d[3];
+        aim_start(tracers, tracer, start, from);
+        camera_direction(camera, from, aim, d);
 #if RIMCL_MIE
         /* the host weighs the camera's directions, before trace_rays normalises again */
         if (first + k < n_rays)
@@ -428,8 +446,9 @@ __kernel void fan_directions(__global const double *tracers, __global const doub
     const int tracer = ray / rays_per_tracer;
     double start[3];
     tracer_start(tracers, tracer, camera[CAM_X_SHEET], start);
-    double d[3];
-    camera_direction(camera, start, aims + 3 * (ray - tracer * rays_per_tracer), d);
+    double from[3], d[3];
+    aim_start(tracers, tracer, start, from);
+    camera_direction(camera, from, aims + 3 * (ray - tracer * rays_per_tracer), d);
     normalise3(d);
     for (int q = 0; q < 3; ++q)
         directions[3 * ray + q] = d[q];

@@ -90,8 +90,9 @@ def _case_list(_ctx, _param, value):
 @click.option(
     "--sensitivity",
     is_flag=True,
-    help="Measure every case again with the threshold x1/2 and x2, the other interpolation "
-    "and 4x the rays: a sensitivity band per headline number [run.sensitivity].",
+    help="Measure every case again with the other interpolation and 4x the rays: their "
+    "part of the sensitivity band (every study has the threshold x1/2 and x2) "
+    "[run.sensitivity].",
 )
 @click.option("--no-progress", is_flag=True, help="No progress bars.")
 @handle_errors

@@ -16,7 +16,7 @@ import pytest
 from rimcl.core.errors import RimclError
 from rimcl.imaging.centroid import TracerFlag
 from rimcl.imaging.device import image_points
-from rimcl.imaging.frames import Imaging, image_batch
+from rimcl.imaging.frames import THRESHOLD_VARIANTS, Imaging, image_batch
 from rimcl.imaging.render import FrameImage, Renderer
 from rimcl.ptv.measure import run_render
 from rimcl.scene.config import MeasureConfig, MieConfig
@@ -72,10 +72,12 @@ def _both(imaging, points, usable, weights, flags, scales, device):
 
 
 def _assert_same(numpy_columns, device_columns, same_images):
-    assert np.array_equal(numpy_columns["flags"], device_columns["flags"])
+    variants = [suffix for suffix, _ in THRESHOLD_VARIANTS]
+    for name in ("flags", *(f"flags_{suffix}" for suffix in variants)):
+        assert np.array_equal(numpy_columns[name], device_columns[name]), name
     for name in ("area", "n_rays_ok"):
         assert np.array_equal(numpy_columns[name], device_columns[name]), name
-    for name in ("x2", "x3"):
+    for name in ("x2", "x3", *(f"{x}_{suffix}" for x in ("x2", "x3") for suffix in variants)):
         expected, got = numpy_columns[name], device_columns[name]
         if same_images:
             np.testing.assert_array_equal(got, expected, err_msg=name)
@@ -112,6 +114,14 @@ def test_image_points_match_the_numpy_engine(device, kind, bits, weights):
     seen = np.bitwise_or.reduce(reference["flags"])
     for flag in ("NO_RAYS", "SPLIT", "TOUCHES_EDGE", "RAYS_OUTSIDE_WINDOW", "RAYS_FAILED"):
         assert seen & TracerFlag[flag], flag
+    # the variant thresholds locate the same images again: a found tracer's centroid moves
+    # (excess weights) and the doubled threshold loses the faint one only where its peak
+    # lies between the two thresholds
+    found = np.isfinite(reference["x2"])
+    assert np.isfinite(reference["x2_threshold_half"][found]).all()
+    peak = reference["peak"]
+    doubled = 2 * imaging.threshold
+    assert (np.isnan(reference["x2_threshold_double"]) == ~(found & (peak > doubled))).all()
     # the twins tie: the first component in raster order is the tracer's
     assert reference["flags"][3] & TracerFlag.SPLIT
     assert abs(reference["x2"][3] / PIXEL - 200.25) < 1

@@ -51,6 +51,8 @@ def _config(engine, device, window_mm, fluid_index, **options):
         ("C1", 5.0, 1.0, {"renderer": "paper", "bit_depth": 10}),
         ("C3", 3.0, 1.335, {"renderer": "exact", "bit_depth": 16}),
         ("C3", 5.0, 1.0, {"renderer": "paper", "bit_depth": 16, "centroid_weights": "grey"}),
+        # the rays aimed through a strong field (rimcl.optics.aiming): the same aim on both
+        ("C4", 10.0, 1.335, {"renderer": "exact", "bit_depth": 12, "threshold": 200.0}),
     ],
 )
 def test_lens_measurement_matches_the_numpy_engine(device, case, window_mm, fluid_index, options):
@@ -63,7 +65,7 @@ def test_lens_measurement_matches_the_numpy_engine(device, case, window_mm, flui
     assert device_result.config["engine"] == "device"
     assert numpy_result.attrs["camera"] == "lens"
     assert_engines_agree(numpy_result, device_result)
-    if case == "C3":  # the stronger field deflects rays past the pupil
+    if case == "C4":  # aimed through the strong field, the rim of the cone misses the pupil
         assert np.bitwise_or.reduce(numpy_result.tracers["flags_meas"]) & TracerFlag.RAYS_VIGNETTED
         assert not numpy_result.rays["collected"].all()
 
@@ -105,3 +107,25 @@ def test_device_directions_are_the_hosts(device, f_number, window, fluid_index):
     starts = np.repeat(scene.in_sheet(tracers), camera.rays_per_tracer, axis=0)
     _, expected = _validate_rays(starts, camera.directions(tracers).reshape(-1, 3))
     np.testing.assert_array_equal(got.reshape(-1, 3), expected)
+
+
+def test_ray_aiming_is_per_tracer_so_shards_give_the_whole_runs_numbers(device):
+    """Each tracer's aim is found from its own chief rays: measured in two shards, C4
+    through the default lens gives the whole run's rows to the last bit."""
+    from rimcl.ptv.render_file import merge_results
+    from rimcl.scene.load import load_scene
+    from rimcl.scene.study_config import StudyConfig
+
+    overrides = {
+        "tracers.count": 6,
+        "camera.pupil_rays": 16,
+        "time.frames": 3,
+        "run.device": device.name,
+    }
+    config = StudyConfig.from_scene(load_scene(None, overrides)).measure("C4")
+    whole = run_render(None, case="C4", config=config)
+    merged = merge_results(
+        [run_render(None, case="C4", config=config, shard=s) for s in ((0, 2), (2, 6))]
+    )
+    for name, values in whole.tracers.items():
+        np.testing.assert_array_equal(merged.tracers[name], values, err_msg=name)

@@ -406,3 +406,25 @@ def test_circularity_of_images_of_a_few_pixels_is_not_drawn(tmp_path):
     titles = [" ".join(ax.get_title(loc="left").split()) for ax in figure.axes]
     assert any("whole pixels, ΔA/A moves in steps of 0.25" in t for t in titles)
     assert layout_problems(figure) == []
+
+
+def test_dt_sweep_draws_a_quantity_that_some_time_steps_lack(study):
+    """At 3Δt five frames hold no acceleration (it needs 7): the acceleration panel stays,
+    with n/a there; a quantity at one time step only is not drawn."""
+    _, stats, _ = study
+    lacking = json.loads(json.dumps(stats))
+    for case in lacking["cases"]:
+        for group in ("acceleration", "velocity_fit", "acceleration_fit"):
+            case.pop(group, None)
+            case["baseline"].pop(group, None)
+    only_first = json.loads(json.dumps(stats))
+    for case in only_first["cases"]:
+        case.pop("velocity_fit", None)
+    sweep = {0.02: stats, 0.04: only_first, 0.06: lacking}
+    figure, data = draw_dt_sweep(sweep)
+    panels = data["panels"]
+    assert "acceleration.a3" in panels["quantities"]
+    assert "velocity_fit.u3" not in panels["quantities"]  # at 0.02 only
+    entry = panels["cases"]["C1"]["acceleration.a3"]
+    assert entry["refraction"][2] is None and entry["refraction"][0] is not None
+    assert layout_problems(figure) == []

@@ -209,3 +209,41 @@ def test_aiming_ends_early_with_the_bits_of_every_newton_step():
     shaped = aim_through_layers(lateral.reshape(100, 200, 2), depths[0], ratios)
     single = aim_through_layers(lateral, depths[0], ratios)
     np.testing.assert_array_equal(shaped.reshape(-1, 3), single)
+
+
+def test_ray_aiming_brings_the_bent_chief_ray_to_the_pupil_centre(device):
+    """A constant index gradient bends every ray of a tracer by the same angle, more than
+    the f/8 pupil's half angle: aimed as through a uniform fluid every ray misses the
+    pupil; aimed through the field (rimcl.optics.aiming) the chief ray lands on the pupil
+    centre and the whole cone is collected. A uniform field leaves the aim alone."""
+    import rimcl
+    from rimcl.fields.field import analytic_field
+    from rimcl.optics.aiming import aim_origins, chief_misses
+
+    window = FlatWindow(thickness_mm=10.0, glass_index=1.52, outside_index=1.0)
+    camera = _camera(window=window, fluid_index=1.335, rays=64)
+    tracers = np.array([[np.pi, np.pi], [2.0, 4.0], [5.0, 1.0]])
+    box = {"box_lo": (0.0, -40.0, -40.0), "box_hi": (2 * np.pi, 40.0, 40.0)}
+    options = {"device": device, "precision": "f64"}
+    uniform = rimcl.Field.from_arrays(
+        np.zeros((8, 8, 8)), spacing=(2 * np.pi / 8,) * 3, n_ref=1.335, boundary="periodic"
+    )
+    assert aim_origins(camera, uniform, tracers, options) is tracers
+    field = analytic_field("linear", n0=1.335, g=0.02, **box)  # 0.09 rad across the fluid
+    radius = 0.5 * camera.pupil.diameter
+
+    def collected(origins):
+        starts = np.repeat(camera.scene.in_sheet(tracers), camera.rays_per_tracer, axis=0)
+        directions = camera.directions(origins).reshape(-1, 3)
+        result = rimcl.trace_rays(field, starts, directions, x_end=camera.scene.x_end, **options)
+        return camera.collected(result.end_pos, result.end_dir, result.exit_index)
+
+    before = np.hypot(*chief_misses(camera, field, tracers, tracers, options).T)
+    assert (before > 3 * radius).all() and not collected(tracers).any()
+    origins = aim_origins(camera, field, tracers, options)
+    after = np.hypot(*chief_misses(camera, field, tracers, origins, options).T)
+    assert (after < 1e-6 * radius).all()
+    # the cone fills the pupil but for its rim (the gradient bends its rays a little
+    # differently, as the window does)
+    share = collected(origins).reshape(len(tracers), -1).mean(axis=1)
+    assert (share >= 0.9).all()

@@ -196,3 +196,69 @@ def test_a_failed_piv_study_leaves_nothing_that_refuses_the_corrected_rerun(
     with pytest.raises(RimclError, match=message):
         run_study(tiny_scene(device, **{"run.mode": "piv", **keys}), out, figures=False)
     assert not (out / "scene.toml").exists()
+
+
+def test_a_lens_is_focused_in_each_cases_index_with_a_reference_of_its_own(device):
+    """PIV through the lens camera: each case's lens is focused (and its uniform pair
+    traced) in that case's mean index, as PTV's; a reference made for another index is
+    not reused, the case's own is."""
+    from rimcl.piv.study import run_piv_case
+
+    scene = tiny_scene(
+        device,
+        **{
+            "camera.kind": "lens",
+            "camera.sensor_pixels": [128, 128],
+            "camera.magnification": 0.02,
+        },
+    )
+    piv, configs = configs_from_study(StudyConfig.from_scene(scene))
+    c0 = run_piv_case(case="C0", piv=piv, reference=[], **configs)
+    c4 = run_piv_case(case="C4", piv=piv, reference=[c0.reference], **configs)
+    index = {
+        name: case.render.reference.key["camera"]["fluid_index"]
+        for name, case in (("C0", c0), ("C4", c4))
+    }
+    # the shipped sample's n = 1 + G ρ: C0 is air-like, C4 water-like
+    assert index["C0"] == pytest.approx(1.0, abs=1e-4)
+    assert index["C4"] == pytest.approx(1.35, abs=0.01)
+    assert c4.reference is not c0.reference
+    again = run_piv_case(case="C4", piv=piv, reference=[c0.reference, c4.reference], **configs)
+    assert again.reference is c4.reference
+    np.testing.assert_array_equal(again.vectors["dx_field"], c4.vectors["dx_field"])
+
+
+def test_the_summary_sets_ptv_and_piv_settings_side_by_side(both):
+    """The tiny study's PIV frames differ from its PTV images in Δt, pixel and rays: the
+    summary says so beside the verdict, with both values of each."""
+    out, result, _ = both
+    settings = result.stats["cases"][0]["piv_vs_ptv"]["settings"]
+    assert settings["ptv"]["dt"] == result.stats["cases"][0]["dt"]
+    assert settings["piv"]["dt"] == pytest.approx(0.1)
+    assert settings["ptv"]["rays_per_tracer"] == 16 and settings["piv"]["rays_per_tracer"] == 4
+    assert settings["ptv"]["bit_depth"] == 12 and settings["piv"]["bit_depth"] == 16
+    assert settings["differ"] == ["dt", "pixel_size_over_L", "rays_per_tracer", "bit_depth"]
+    assert not settings["like_for_like"]
+    summary = (out / "summary.md").read_text()
+    assert "| rays per tracer | 16 | 4 |" in summary
+    assert "**Not like for like**: PTV and PIV differ in Δt, pixel on the sheet / L, rays" in (
+        summary
+    )
+
+
+def test_like_for_like_settings_are_named_so(device):
+    """The same Δt, camera, pixel, rays and bits: like for like."""
+    from rimcl.piv.comparison import side_by_side
+
+    scene = tiny_scene(
+        device,
+        **{"piv.dt": 0.02, "piv.rays": 16, "piv.bit_depth": 12, "renderer.pixels": 64},
+    )
+    study = StudyConfig.from_scene(scene)
+    pixel = 1 / 64
+    ptv_case = {"dt": 0.02, "pixel_size_over_L": pixel}
+    settings = side_by_side(study, ptv_case, {"dt": 0.02, "pixel_size_over_L": pixel})
+    assert settings["like_for_like"] and settings["differ"] == []
+    assert settings["ptv"] == settings["piv"]
+    longer = side_by_side(study, ptv_case, {"dt": 0.1, "pixel_size_over_L": pixel})
+    assert longer["differ"] == ["dt"]

@@ -9,7 +9,9 @@ from rimcl.stats.document import case_statistics
 from rimcl.stats.render_file import load_render
 from rimcl.stats.sensitivity import (
     EXCLUDED_BY_OPTICS,
+    FILE_VARIANTS,
     MEASURED_VARIANTS,
+    THRESHOLD_NAMES,
     bands,
     headline_values,
 )
@@ -49,10 +51,13 @@ def test_a_band_reads_stable_inside_the_interval_and_names_the_largest_move():
     case = {"velocity": {"u3": {"rms_normalized": 0.32, "ci95": {"rms_normalized": [0.28, 0.36]}}}}
     path = "velocity.u3.rms_normalized"
     inside = bands(case, {"threshold ×½": {path: 0.30}, "rays ×4": {path: 0.35}})[path]
-    # stable only against what ran
-    assert inside["stable"] and inside["text"] == "stable against threshold ×½, rays ×4"
-    every = {name: {path: 0.33} for name in (EXCLUDED_BY_OPTICS, *MEASURED_VARIANTS)}
+    # stable against what ran; the measured variants that did not run are named
+    # inside the interval: stable, with the largest move beside it
+    assert inside["stable"] and inside["text"] == "stable (rays ×4: +9 %)"
+    assert inside["not_run"] == ["the other interpolation"]
+    every = {name: {path: 0.32} for name in (*FILE_VARIANTS, *MEASURED_VARIANTS)}
     assert bands(case, every)[path]["text"] == "stable"
+    assert bands(case, every)[path]["not_run"] == []
     # C4's threshold dependence (14.7 / 32.0 / 37.7 %) shows
     moved = bands(case, {"threshold ×½": {path: 0.147}, "threshold ×2": {path: 0.377}})[path]
     assert not moved["stable"]
@@ -65,8 +70,7 @@ def test_variant_scenes_change_one_setting():
 
     scene = load_scene(overrides={"cases.thresholds": {"C4": 80.0}})
     changed = {directory: variant_scene(scene, directory) for _, directory in VARIANTS}
-    assert changed["threshold_half"]["renderer"]["threshold"] == scene["renderer"]["threshold"] / 2
-    assert changed["threshold_double"]["cases"]["thresholds"] == {"C4": 160.0}
+    assert set(changed) == {"interpolation", "rays_x4"}  # the thresholds need no measurement
     assert changed["interpolation"]["integrator"]["interp"] == "bspline3"
     assert changed["rays_x4"]["camera"]["pupil_rays"] == 4 * scene["camera"]["pupil_rays"]
     paper = load_scene(preset="paper")
@@ -91,10 +95,92 @@ def test_a_study_with_sensitivity_measures_every_variant(device, tmp_path):
     for _, directory in VARIANTS:
         assert (tmp_path / "sensitivity" / directory / "cases" / "C1.h5").is_file()
     (case,) = result.stats["cases"]
-    assert set(case["sensitivity"]["variants"]) == {EXCLUDED_BY_OPTICS, *(n for n, _ in VARIANTS)}
+    assert set(case["sensitivity"]["variants"]) == {*FILE_VARIANTS, *(n for n, _ in VARIANTS)}
     band = case["sensitivity"]["bands"]["velocity.u3.rms_normalized"]
     assert set(band["relative"]) == set(case["sensitivity"]["variants"])
     assert "Sensitivity to settings" in (tmp_path / "summary.md").read_text()
     # a rerun keeps every variant's file
     again = run_study(load_scene(None, overrides), tmp_path, figures=False)
     assert again.ran == []
+
+
+def _with_threshold_columns(path, moved_ids, factor):
+    """Add the threshold variants' columns to a synthetic render file: at ×½ the same
+    positions as at ×1; at ×2 the tracers ``moved_ids`` have ``factor`` times their
+    measured velocity error and tracer 0 is lost (below the threshold)."""
+    with h5py.File(path, "a") as h5:
+        for group, symbol in (("tracers", "x"), ("velocity", "u"), ("acceleration", "a")):
+            table = h5[group]
+            ids = table["id"][...]
+            for suffix in THRESHOLD_NAMES.values():
+                for c in (2, 3):
+                    ref, meas = table[f"{symbol}{c}_ref"][...], table[f"{symbol}{c}_meas"][...]
+                    if suffix == "threshold_double" and symbol == "u":
+                        moved = np.isin(ids, moved_ids)
+                        meas = np.where(moved, ref + factor * (meas - ref), meas)
+                    table[f"{symbol}{c}_ref_{suffix}"] = ref
+                    table[f"{symbol}{c}_meas_{suffix}"] = meas
+                lost = (ids == 0) * (1 if suffix == "threshold_double" else 0)
+                table[f"flags_{suffix}"] = table["flags"][...] | lost
+
+
+def test_every_case_carries_its_threshold_band_from_its_own_file(tmp_path):
+    """The threshold ×½ and ×2 come from the file's own columns: the same numbers where the
+    positions are the same, 'depends on threshold ×2' where its errors grow, and the
+    tracers each threshold keeps."""
+    path = tmp_path / "c4.h5"
+    write_render_file(path, case="C4", k_rho=0.334, n_tracers=60)
+    _with_threshold_columns(path, moved_ids=np.arange(30), factor=3.0)
+    tables = load_render(path)
+    case = case_statistics(tables)
+    variants = case["sensitivity"]["variants"]
+    assert set(variants) == set(FILE_VARIANTS)
+    assert variants["threshold ×½"]["n_used"] == 60 and variants["threshold ×2"]["n_used"] == 59
+    u3 = "velocity.u3.rms_normalized"
+    # ×½: the positions of ×1, the same numbers
+    for path_, value in headline_values(tables).items():
+        assert variants["threshold ×½"][path_] == pytest.approx(value)
+    # ×2: tracers 1..29 carry 3 times their error (tracer 0 left out): the known ratio
+    velocity = tables.velocity
+    keep = velocity["id"] != 0
+    error = velocity["u3_meas"][keep] - velocity["u3_ref"][keep]
+    error = np.where(velocity["id"][keep] < 30, 3.0 * error, error)
+    expected = np.sqrt(np.sum(error**2) / np.sum(velocity["u3_true"][keep] ** 2))
+    assert variants["threshold ×2"][u3] == pytest.approx(expected)
+    band = case["sensitivity"]["bands"][u3]
+    assert band["text"].startswith("depends on threshold ×2 by +")
+    # positions did not move at either threshold: stable
+    assert case["sensitivity"]["bands"]["position_error_median_over_L"]["text"] == "stable"
+    assert band["not_run"] == list(MEASURED_VARIANTS)
+
+
+def test_a_default_study_shows_the_threshold_band_of_every_headline_number(device, tmp_path):
+    """A default-style study (the lens camera, noise, Mie) on a tiny scene: every headline
+    number of every case has its band from the threshold ×½ and ×2 without --sensitivity,
+    and the summary says which variants the band includes."""
+    from rimcl.scene.load import load_scene
+    from rimcl.study.run import run_study
+
+    overrides = {
+        "cases.names": ["C2", "C3"],
+        "tracers.count": 12,
+        "camera.pupil_rays": 32,
+        "time.frames": 5,
+        # 15 % of the reference peak: high enough that the doubled threshold loses C3's
+        # dim, spread images
+        "renderer.threshold": 200.0,
+        "run.device": device.name,
+    }
+    result = run_study(load_scene(None, overrides), tmp_path, figures=False)
+    assert not (tmp_path / "sensitivity").exists()  # nothing measured again
+    for case in result.stats["cases"]:
+        assert set(case["sensitivity"]["variants"]) == set(FILE_VARIANTS)
+        for band in case["sensitivity"]["bands"].values():
+            assert set(band["variants"]) >= set(THRESHOLD_NAMES)
+            assert band["text"].startswith(("stable", "depends on "))
+    # C3's images are dim and spread: the doubled threshold loses tracers
+    c3 = result.stats["cases"][-1]
+    assert c3["sensitivity"]["variants"]["threshold ×2"]["n_used"] < c3["n_used"]
+    summary = (tmp_path / "summary.md").read_text()
+    assert "*threshold ×½*, *threshold ×2*" in summary
+    assert "does not include *the other interpolation* and *rays ×4*" in summary

@@ -28,7 +28,9 @@ def test_each_case_gets_the_configuration_the_scene_gives_it(scene):
     else:
         assert set(thresholds.values()) == {scene["renderer"]["threshold"]}
     assert study.run.mode == "both" and study.piv.rays == 9
-    assert study.dt_multiples == tuple(scene["time"]["dt_multiples"])
+    # unset: every m the frames allow
+    assert scene["time"]["dt_multiples"] is None
+    assert study.dt_multiples == tuple(range(1, scene["time"]["frames"]))
 
 
 def test_the_scene_record_and_text_are_the_scenes(scene):

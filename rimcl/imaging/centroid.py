@@ -89,7 +89,7 @@ def not_found(flags):
     return Blob(np.nan, np.nan, 0, np.nan, np.nan, TracerFlag(flags))
 
 
-def locate(counts, threshold, weights="excess"):
+def locate(counts, threshold, weights="excess", shape=True):
     """Centroid, area, perimeter and circularity of the tracer in a window image.
 
     Parameters
@@ -100,6 +100,8 @@ def locate(counts, threshold, weights="excess"):
         Pixels strictly above it belong to tracers.
     weights : {"excess", "grey"}
         Centroid weight: grey value minus threshold, or grey value.
+    shape : bool
+        Measure the perimeter and circularity (False: NaN, for a centroid alone).
 
     Returns
     -------
@@ -142,7 +144,7 @@ def locate(counts, threshold, weights="excess"):
         total = total - threshold * area
         moment_col = moment_col - threshold * float(twice_col.sum())
         moment_row = moment_row - threshold * float(twice_row.sum())
-    boundary = float(perimeter(mask, neighborhood=4))
+    boundary = float(perimeter(mask, neighborhood=4)) if shape else np.nan
     return Blob(
         col=moment_col / 2 / total,
         row=moment_row / 2 / total,

@@ -23,7 +23,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.imaging.centroid import NO_POSITION, TracerFlag
-from rimcl.imaging.frames import empty_columns
+from rimcl.imaging.frames import VARIANT_COLUMNS, empty_columns
 from rimcl.imaging.render import TRUNCATE_SIGMAS
 from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS
 from rimcl.optics.trace import STATUS_NAMES
@@ -159,11 +159,19 @@ class DeviceImager:
         rw, ro = cl.mem_flags.READ_WRITE, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
         # the reference peak: full scale, or with noise peak_electrons (Sensor.scale_for)
         self.scale_target = float(sensor.peak_electrons if sensor.noise else renderer.full_scale)
-        camera = [sigma, float(imaging.threshold), float(renderer.full_scale), self.scale_target]
         electrons = [sensor.background_e, sensor.full_well_e, sensor.read_noise_e, sensor.gain]
         recurrence = [math.exp(-32.0 / sigma**2), math.exp(-64.0 / sigma**2)]  # image.cl
-        consts = np.concatenate([camera, electrons, recurrence, kernel]).astype(np.float64)
-        self.consts = cl.Buffer(context, ro, hostbuf=consts)
+
+        def consts_for(threshold):
+            camera = [sigma, threshold, float(renderer.full_scale), self.scale_target]
+            consts = np.concatenate([camera, electrons, recurrence, kernel]).astype(np.float64)
+            return cl.Buffer(context, ro, hostbuf=consts), round(threshold * 65536)
+
+        #: per threshold (None: the camera's; else a suffix of THRESHOLD_VARIANTS): the
+        #: kernel's constants and its threshold in 1/65536 counts
+        self.thresholds = {None: (float(imaging.threshold), *consts_for(imaging.threshold))}
+        for suffix, value in imaging.variant_thresholds():
+            self.thresholds[suffix] = (value, *consts_for(value))
         area = window * window
         slot_bytes = area * 24 + self.rays * 24 + 16 * SPLAT_BLOCK * self.table_width
         budget = SCRATCH_SHARE * device.global_mem_size
@@ -191,7 +199,6 @@ class DeviceImager:
         self._weights_key = None
         self.canvas = None
         self.canvas_shape = (0, 0)
-        self.threshold_fixed = round(float(imaging.threshold) * 65536)
         self.perimeter_weights = _perimeter_weights()
 
     def set_weights(self, weights, n_tracers):
@@ -253,7 +260,9 @@ class DeviceImager:
         """Whether every image is scaled to its own peak (``per_image`` scaling)."""
         return self.imaging.scaling == "per_image"
 
-    def enqueue(self, rays, n_tracers, weights, scales=None, canvas=False, noise=None):
+    def enqueue(
+        self, rays, n_tracers, weights, scales=None, canvas=False, noise=None, variant=None
+    ):
         """Image ``n_tracers`` tracers whose rays are in the device buffers ``rays``.
 
         Parameters
@@ -272,6 +281,10 @@ class DeviceImager:
             ``(pass_id, frame, tracer0)`` of a noisy sensor's draws
             (:class:`rimcl.imaging.sensor.NoiseKey`): tracer ``t`` of the batch draws as the global
             tracer ``tracer0 + t``.
+        variant : str, optional
+            Locate the tracers at this variant threshold (a suffix of
+            :data:`rimcl.imaging.frames.THRESHOLD_VARIANTS`) instead of the camera's: the
+            same images (the same noise draws) rendered again from the rays on the device.
 
         Returns
         -------
@@ -291,8 +304,9 @@ class DeviceImager:
         canvas_buffer = self.canvas if canvas else self.counter
         height, width = self.canvas_shape if canvas else (0, 0)
         renderer = self.imaging.renderer
+        _, consts, threshold_fixed = self.thresholds[variant]
         self.kernel.set_args(
-            self.consts,
+            consts,
             np.int32(n_tracers),
             np.int32(self.rays),
             np.int32(renderer.max_window),
@@ -301,7 +315,7 @@ class DeviceImager:
             np.int32(self.table_width),
             np.int32(per_ray),
             np.int32(own_scale),
-            np.int64(self.threshold_fixed),
+            np.int64(threshold_fixed),
             *rays,
             weight_buffer,
             self.scales,
@@ -340,6 +354,35 @@ class DeviceImager:
         first = cl.enqueue_copy(self.queue, rows_l, self.rows_l, is_blocking=False)
         return [first, cl.enqueue_copy(self.queue, rows_d, self.rows_d, is_blocking=False)]
 
+    def enqueue_variants(self, rays, n_tracers, weights, scales, noise, rows):
+        """Locate the tracers of the last :meth:`enqueue` again at each variant threshold.
+
+        The image kernel runs once per variant on the same rays (no tracing; the same
+        images, the same noise draws), each launch's rows read into ``rows[suffix]``
+        (host arrays of :meth:`empty_rows`, at least ``n_tracers`` long) before the next.
+
+        Returns
+        -------
+        reads, kernels : list of pyopencl.Event
+        """
+        reads, kernels = [], []
+        for suffix, (rows_l, rows_d) in rows.items():
+            kernels.append(self.enqueue(rays, n_tracers, weights, scales, False, noise, suffix))
+            reads += self.enqueue_read(rows_l[:n_tracers], rows_d[:n_tracers])
+        return reads, kernels
+
+    def variant_rows(self, count):
+        """Host arrays for :meth:`enqueue_variants`: ``{suffix: (rows_l, rows_d)}``."""
+        return {suffix: self.empty_rows(count) for suffix in self.thresholds if suffix}
+
+    def add_variants(self, out, rows, scales=None):
+        """Fill the variant columns of ``out`` (:meth:`columns`) from the variant rows."""
+        for suffix, (rows_l, rows_d) in rows.items():
+            count = len(out["flags"])
+            located = self.columns(rows_l[:count], rows_d[:count], scales, suffix)
+            for name in VARIANT_COLUMNS:
+                out[f"{name}_{suffix}"] = located[name]
+
     @staticmethod
     def empty_rows(count):
         """Host arrays for the rows of ``count`` tracers: ``(rows_l, rows_d)``."""
@@ -354,7 +397,7 @@ class DeviceImager:
         status = rows_l[:, _ROW_STATUS : _ROW_STATUS + len(STATUS_NAMES)].sum(axis=0)
         return status, int(rows_l[:, _ROW_VIGNETTED].sum()), int(rows_l[:, _ROW_STEPS].sum())
 
-    def columns(self, rows_l, rows_d, scales=None):
+    def columns(self, rows_l, rows_d, scales=None, variant=None):
         """Per-tracer rows → the columns of :data:`rimcl.imaging.frames.IMAGE_COLUMNS`.
 
         Parameters
@@ -364,6 +407,8 @@ class DeviceImager:
         scales : ndarray, shape (B,), optional
             The scales the kernel was given (None: the reference pass; ignored with
             ``per_image`` scaling).
+        variant : str, optional
+            The variant threshold the rows were located at (:meth:`enqueue`).
 
         Returns
         -------
@@ -392,7 +437,7 @@ class DeviceImager:
         out["flags"] = flags
         found = (flags & int(NO_POSITION)) == 0
         out["area"] = np.where(found, area, 0)
-        threshold = float(self.imaging.threshold)
+        threshold = self.thresholds[variant][0]
         total = rows_l[:, _ROW_SUM].astype(np.float64)
         moment_col = rows_l[:, _ROW_SUM_COL].astype(np.float64)
         moment_row = rows_l[:, _ROW_SUM_ROW].astype(np.float64)
@@ -485,15 +530,24 @@ class PointImager:
             key = None if noise is None else (noise[0], noise[1], first_id + first)
             imager.enqueue(self.buffers, last - first, weight_arg, some, canvas is not None, key)
             rows_l, rows_d = imager.empty_rows(last - first)
-            cl.wait_for_events(imager.enqueue_read(rows_l, rows_d))
-            parts.append(imager.columns(rows_l, rows_d, some))
+            reads = imager.enqueue_read(rows_l, rows_d)
+            # the same images located again at the variant thresholds (no new rays)
+            variants = imager.variant_rows(last - first)
+            reads += imager.enqueue_variants(
+                self.buffers, last - first, weight_arg, some, key, variants
+            )[0]
+            cl.wait_for_events(reads)
+            part = imager.columns(rows_l, rows_d, some)
+            imager.add_variants(part, variants, some)
+            parts.append(part)
         out = (
             {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
             if parts
             else empty_columns(0)
         )
         known = int(TracerFlag.RAYS_FAILED | TracerFlag.RAYS_VIGNETTED)
-        out["flags"] = (out["flags"] & ~known) | np.asarray(flags, dtype=np.int64)
+        for column in ("flags", *(f"flags_{suffix}" for suffix in imager.thresholds if suffix)):
+            out[column] = (out[column] & ~known) | np.asarray(flags, dtype=np.int64)
         if canvas is not None:
             total = canvas.counts.astype(np.int64) + imager.read_canvas()
             canvas.counts[...] = np.minimum(total, canvas.full_scale).astype(np.uint16)

@@ -11,7 +11,9 @@ device and only per-tracer rows (and the small ray sample) come back:
    them to the sheet (a lens: to its focus plane) and applies the camera's collection
    test in float64 as the host does, and keeps each ray's image point in pixels;
 2. ``cl/image.cl`` renders, digitises and locates each tracer's image
-   (:mod:`rimcl.imaging.device`).
+   (:mod:`rimcl.imaging.device`), then again at each variant threshold of
+   :data:`rimcl.imaging.frames.THRESHOLD_VARIANTS` from the rays still on the device (the
+   same images: the fan kernel does not run again).
 
 The image points and windows are computed with the NumPy engine's float64 operations; the
 renders differ only by the summation order of float64 sums (about 1e-16 of a pixel's
@@ -132,6 +134,7 @@ class _Frame:
     positions: np.ndarray
     field: object
     plan: object
+    aim_from: np.ndarray
 
 
 @dataclasses.dataclass
@@ -142,7 +145,7 @@ class _Batch:
     host: dict
     events: list
     fan_event: object
-    image_event: object
+    image_events: list
     sample_rays: np.ndarray = None
 
 
@@ -378,7 +381,8 @@ class DeviceEngine:
         context = context_for(device)
         size = self.batch * self.rays
         rw = cl.mem_flags.READ_WRITE
-        self.tracers = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.batch * 16)
+        # (x2, x3) of each tracer and the point its rays are aimed from (cl/fan.cl)
+        self.tracers = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.batch * 32)
         self.ray_buffers = (
             cl.Buffer(context, rw, size=size * 16),
             cl.Buffer(context, rw, size=size * 4),
@@ -418,7 +422,8 @@ class DeviceEngine:
         n_rays = len(positions) * self.rays
         out = np.empty((len(positions), self.rays, 3), dtype=np.float64)
         directions = cl.Buffer(self.queue.context, cl.mem_flags.WRITE_ONLY, size=out.nbytes)
-        cl.enqueue_copy(self.queue, self.tracers, positions)
+        # each tracer aimed from itself (cl/fan.cl's layout: position, then aim origin)
+        cl.enqueue_copy(self.queue, self.tracers, np.concatenate([positions, positions], axis=1))
         kernel.set_args(
             self.tracers,
             self.fan.aims,
@@ -446,20 +451,33 @@ class DeviceEngine:
         return self.sample_buffers
 
     def image_frame(
-        self, setup, pass_, frame, field, positions, scales=None, extras=None, weights=1.0
+        self,
+        setup,
+        pass_,
+        frame,
+        field,
+        positions,
+        scales=None,
+        extras=None,
+        weights=1.0,
+        aim_from=None,
     ):
         """Trace, render and locate every tracer of one frame on the device.
 
         The device counterpart of the NumPy path of ``rimcl.ptv.imaging_passes._image_frame``, with
         the same parameters, plus ``weights``: light per ray, a number, ``(K,)`` (the same
         fan weights for every tracer, as Mie weights of the initial directions) or
-        ``(N, K)``.
+        ``(N, K)``; ``aim_from``: ``(N, 2)``, the points the tracers' rays are aimed from
+        (:func:`rimcl.optics.aiming.aim_origins`; default the tracers themselves).
         """
         started = time.thread_time()
         extras = extras or {}
         sampler, canvas, bar = extras.get("sampler"), extras.get("canvas"), extras.get("bar")
         kernel, launch, plan = self.fan.kernel(field, setup.trace_options, positions)
-        context = _Frame(setup, pass_, frame, scales, sampler, bar, positions, field, plan)
+        aim_from = positions if aim_from is None else aim_from
+        context = _Frame(
+            setup, pass_, frame, scales, sampler, bar, positions, field, plan, aim_from
+        )
         if canvas is not None:
             self.imager.use_canvas(canvas.counts.shape)
         per_tracer_weights = np.ndim(weights) == 2
@@ -475,6 +493,7 @@ class DeviceEngine:
                 ids,
                 host,
                 positions,
+                aim_from,
                 None if scales is None else scales[ids],
                 weights[ids] if per_tracer_weights else shared,
                 sampler,
@@ -498,19 +517,32 @@ class DeviceEngine:
 
     def _host_arrays(self):
         return {
-            "tracers": np.empty((self.batch, 2), dtype=np.float64),
+            "tracers": np.empty((self.batch, 4), dtype=np.float64),
             **dict(zip(("rows_l", "rows_d"), self.imager.empty_rows(self.batch), strict=True)),
+            "variants": self.imager.variant_rows(self.batch),
         }
 
     def _launch(
-        self, kernel, launch, ids, host, positions, scales, weights, sampler, canvas, noise
+        self,
+        kernel,
+        launch,
+        ids,
+        host,
+        positions,
+        aim_from,
+        scales,
+        weights,
+        sampler,
+        canvas,
+        noise,
     ):
         import pyopencl as cl
 
         count = len(ids)
         n_rays = count * self.rays
         tracers = host["tracers"][:count]
-        tracers[...] = positions[ids]
+        tracers[:, :2] = positions[ids]
+        tracers[:, 2:] = aim_from[ids]
         cl.enqueue_copy(self.queue, self.tracers, tracers, is_blocking=False)
         sample_rays = None
         sample_args = (self.tracers, np.int32(0), self.tracers, self.tracers)
@@ -553,7 +585,12 @@ class DeviceEngine:
             self.ray_buffers, count, weight_arg, scales, canvas, noise
         )
         events += self.imager.enqueue_read(host["rows_l"][:count], host["rows_d"][:count])
-        return _Batch(ids, host, events, fan_event, image_event, sample_rays)
+        # the variant thresholds: the image kernel again on the rays already here
+        reads, variant_events = self.imager.enqueue_variants(
+            self.ray_buffers, count, weight_arg, scales, noise, host["variants"]
+        )
+        events += reads
+        return _Batch(ids, host, events, fan_event, [image_event, *variant_events], sample_rays)
 
     def _collect(self, job, context):
         import pyopencl as cl
@@ -562,7 +599,9 @@ class DeviceEngine:
         count = len(job.ids)
         rows_l, rows_d = job.host["rows_l"][:count], job.host["rows_d"][:count]
         scales, pass_, timings = context.scales, context.pass_, context.setup.timings
-        columns = self.imager.columns(rows_l, rows_d, None if scales is None else scales[job.ids])
+        batch_scales = None if scales is None else scales[job.ids]
+        columns = self.imager.columns(rows_l, rows_d, batch_scales)
+        self.imager.add_variants(columns, job.host["variants"], batch_scales)
         for name, values in columns.items():
             pass_.images[name][context.frame, job.ids] = values
         status_counts, vignetted, steps = self.imager.ray_totals(rows_l)
@@ -570,7 +609,7 @@ class DeviceEngine:
         pass_.vignetted += vignetted
         pass_.ray_steps += steps
         timings["trace"] += event_seconds(job.fan_event)
-        timings["render"] += event_seconds(job.image_event)
+        timings["render"] += sum(event_seconds(event) for event in job.image_events)
         if job.sample_rays is not None and len(job.sample_rays):
             started = time.thread_time()
             self._take_sample(job, context)
@@ -585,7 +624,7 @@ class DeviceEngine:
         local = job.sample_rays.astype(np.int64)
         positions, field = context.positions, context.field
         tracer = job.ids[local // self.rays]
-        directions = self.camera.directions(positions[tracer], local % self.rays)
+        directions = self.camera.directions(context.aim_from[tracer], local % self.rays)
         origins = self.scene.in_sheet(positions[tracer])
         if field.is_uniform:
             limit = self.fan.straight_args[1]

@@ -24,7 +24,15 @@ n_rays_ok    int64   rays that reached the camera (traced ok and collected)
 flags        int64   :class:`rimcl.imaging.centroid.TracerFlag` bits
 peak         float64 brightest pixel before clipping, in counts
 scale        float64 counts per unit of light (set by the reference image)
+x2_<v>       float64 centroid at variant threshold ``v`` of :data:`THRESHOLD_VARIANTS`
+x3_<v>       float64 (the same digitised image, located again); NaN if not found
+flags_<v>    int64   the flags at that threshold (its own ``BELOW_THRESHOLD``,
+                     ``SPLIT``, ``TOUCHES_EDGE``; the rays' and saturation bits shared)
 ============ ======= ==============================================================
+
+The variant thresholds cost no tracing and no rendering: the tracer is located again in the
+counts of its window, so every measurement carries what the threshold ×½ and ×2 would have
+measured (the sensitivity band of :mod:`rimcl.stats.sensitivity`).
 """
 
 import dataclasses
@@ -39,6 +47,10 @@ from rimcl.imaging.render import Renderer
 from rimcl.imaging.sensor import NoiseKey, Sensor
 
 SCALINGS = ("reference", "per_image")
+#: Other thresholds every tracer is located at too: (column suffix, factor on the threshold).
+THRESHOLD_VARIANTS = (("threshold_half", 0.5), ("threshold_double", 2.0))
+#: The columns of a tracer located at one variant threshold (``<name>_<suffix>``).
+VARIANT_COLUMNS = {"x2": np.float64, "x3": np.float64, "flags": np.int64}
 IMAGE_COLUMNS = {
     "x2": np.float64,
     "x3": np.float64,
@@ -51,6 +63,11 @@ IMAGE_COLUMNS = {
     "flags": np.int64,
     "peak": np.float64,
     "scale": np.float64,
+    **{
+        f"{name}_{suffix}": dtype
+        for suffix, _ in THRESHOLD_VARIANTS
+        for name, dtype in VARIANT_COLUMNS.items()
+    },
 }
 
 
@@ -111,6 +128,13 @@ class Imaging:
                 f"the threshold must be in [0, {full_scale}) counts of the "
                 f"{self.renderer.bit_depth}-bit camera, got {self.threshold}"
             )
+
+    def variant_thresholds(self):
+        """``(suffix, threshold in counts)`` of each of :data:`THRESHOLD_VARIANTS` (one at or
+        above full scale finds no tracer: ``BELOW_THRESHOLD``)."""
+        return tuple(
+            (suffix, factor * float(self.threshold)) for suffix, factor in THRESHOLD_VARIANTS
+        )
 
     def describe(self):
         return {
@@ -193,6 +217,7 @@ def image_batch(
             saturated = False
             if not usable[k].any():
                 blob, window = not_found(tracer_flags | TracerFlag.NO_RAYS), None
+                variants = {}
             else:
                 start = time.perf_counter()
                 pixels = renderer.to_pixels(points[k][usable[k]])
@@ -209,13 +234,25 @@ def image_batch(
                 out["peak"][k] = float(np.max(raw)) * scale
                 middle = time.perf_counter()
                 blob = locate(counts, imaging.threshold, imaging.centroid_weights)
+                variants = {
+                    suffix: locate(counts, value, imaging.centroid_weights, shape=False)
+                    for suffix, value in imaging.variant_thresholds()
+                }
                 timings["render"] += middle - start
                 timings["centroid"] += time.perf_counter() - middle
                 if canvas is not None and np.isfinite(scale):  # NaN: a window without light
                     canvas.add(window, counts)
-            tracer_flags |= blob.flags
             if saturated:
                 tracer_flags |= TracerFlag.SATURATED
+            for suffix, _ in THRESHOLD_VARIANTS:
+                located = variants.get(suffix, blob)
+                out[f"flags_{suffix}"][k] = int(tracer_flags | located.flags)
+                if not located.flags & NO_POSITION:
+                    position = renderer.to_sheet(
+                        [window.col0 + located.col, window.row0 + located.row]
+                    )
+                    out[f"x2_{suffix}"][k], out[f"x3_{suffix}"][k] = position
+            tracer_flags |= blob.flags
             if not blob.flags & NO_POSITION:
                 position = renderer.to_sheet([window.col0 + blob.col, window.row0 + blob.row])
                 out["x2"][k], out["x3"][k] = position

@@ -630,9 +630,17 @@ class LensCamera:
         -------
         ndarray, float64, shape (N, K, 3), or (N, 3) with ``aim_index``
         """
+        return self._directions_to(self.aim_points(), tracers, aim_index)
+
+    def chief_directions(self, tracers):
+        """Unit initial directions from each tracer ``(N, 2)`` to the pupil centre through a
+        uniform fluid (the chief rays), shape (N, 3)."""
+        return self._directions_to(self.pupil.centre[None], tracers, np.zeros(len(tracers), int))
+
+    def _directions_to(self, aims, tracers, aim_index):
+        """:meth:`directions` towards the points ``aims`` (K, 3) on the pupil plane."""
         if self.window is None:
-            return self.pupil.directions(tracers, aim_index)
-        aims = self.aim_points()
+            return _toward(aims, self.scene.in_sheet(tracers), aim_index)
         tracers = np.asarray(tracers, dtype=np.float64)
         if aim_index is None:
             lateral = aims[None, :, 1:] - tracers[:, None, :]

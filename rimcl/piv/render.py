@@ -362,9 +362,11 @@ def run_piv_render(
     run : rimcl.scene.config.RunConfig, optional
         Device, engine (``device``: frames made on the OpenCL device; ``numpy``: the
         reference) and rays per batch.
-    reference : PivReference, optional
+    reference : PivReference or sequence of PivReference, optional
         From an earlier case with the same configuration: skips tracers, truth and the
-        uniform-medium pair.
+        uniform-medium pair. A sequence offers candidates: the one made for this
+        configuration is used, and the reference pair is made when none is (a lens
+        camera's reference depends on the case's mean index).
     sensor : rimcl.scene.config.SensorConfig, optional
         The camera's sensor (default: deterministic, ``imaging.bit_depth`` bits); its seed
         defaults to ``piv.seed``. Noise draws: the uniform-medium frames pass 0, the
@@ -395,13 +397,20 @@ def run_piv_render(
         case_index = case_of(source, case, k_rho, FluidConfig() if fluid is None else fluid)
         t_a, t_b, dt, frames, frame_b = _exposure_times(source, int(piv.start_frame), piv.dt)
         scene = _piv_scene(source, piv)
-        cam = camera_config.build(scene)
+        # the case's mean index: a lens is focused through it (as PTV's), the tracers
+        # scatter in it, and the uniform medium of the reference pair has it
+        medium_index = case_index.mean_index(source, int(piv.start_frame), t_a)
+        cam = camera_config.build(scene, medium_index)
         device = select_device(run.device)
         renderer = imaging.renderer(scene, cam)
         sensor_model = (SensorConfig() if sensor is None else sensor).build(
             imaging.bit_depth, piv.seed
         )
-        mie_weights = None if mie is None else mie.build(None if fluid is None else fluid.build())
+        mie_weights = (
+            None
+            if mie is None
+            else mie.build(None if fluid is None else fluid.build(), medium_index)
+        )
         grid = WindowGrid.for_image(
             imaging.frame_shape(scene, cam), int(settings.window), float(settings.overlap)
         )
@@ -425,6 +434,11 @@ def run_piv_render(
         }
         options = {"interp": integrator.interp, "precision": integrator.precision}
         options["device"] = device
+        if isinstance(reference, (list, tuple)):  # candidates: the one made for this key
+            reference = next(
+                (r for r in reference if {k: v for k, v in r.key.items() if k != "motion"} == key),
+                None,
+            )
         n_tracers = None if reference is None else reference.positions.shape[1]
         bar = _progress(progress, n_tracers, 4 if reference is None else 2)
         imaging_options = {
@@ -439,7 +453,7 @@ def run_piv_render(
             start = seed_particles(scene, imaging, rng, cam)
             positions, motion = move_tracers(source, scene, start, (t_a, t_b), frames)
             weights = pair_weights(positions, scene.x_sheet, imaging.thickness(scene, cam))
-            uniform = uniform_like(source)
+            uniform = uniform_like(source, getattr(cam, "fluid_index", 1.0))
             if bar is not None:
                 bar.reset(total=4 * positions.shape[1])
             uniform_frames = image_frames(

@@ -16,9 +16,9 @@ of ``u2``, ``u3`` and ``|u|``, with velocities ``u = d · pixel_size / Δt``), o
 valid in both measurements whose window holds tracers. A vector replaced by the outlier
 test in either measurement is left out and counted.
 
-The lead's study calls :func:`run_piv_case` once per case, passing the ``reference`` of the
-first case to the others (tracers, truth, uniform-medium frames and vectors are the same
-for every case).
+The lead's study calls :func:`run_piv_case` once per case, offering the references made
+so far (tracers, truth, uniform-medium frames and vectors are the same for every case of a
+configuration; a lens camera, focused in each case's mean index, makes one per case).
 """
 
 import dataclasses
@@ -386,8 +386,10 @@ def run_piv_case(
         Imaging, timing and correlation (``piv.settings``).
     camera, integrator, fluid, run, sensor, mie : optional
         The :mod:`rimcl.scene.config` objects of :func:`rimcl.piv.render.run_piv_render`.
-    reference : PivCaseReference, optional
-        ``PivCase.reference`` of an earlier case of the same configuration.
+    reference : PivCaseReference or sequence of PivCaseReference, optional
+        ``PivCase.reference`` of an earlier case of the same configuration; a sequence
+        offers candidates, the one made for this case's configuration is used (a lens is
+        focused in each case's mean index: its reference is made per index).
     progress : bool
         A progress bar over the tracers imaged (on a terminal).
 
@@ -397,7 +399,9 @@ def run_piv_case(
     """
     piv = PivConfig() if piv is None else piv
     settings = piv.settings
-    if reference is not None and reference.settings != settings:
+    candidates = list(reference) if isinstance(reference, (list, tuple)) else [reference]
+    candidates = [r for r in candidates if r is not None]
+    if any(r.settings != settings for r in candidates):
         raise RimclError("the PIV reference was made with other correlation settings")
     start = time.perf_counter()
     render = run_piv_render(
@@ -409,12 +413,15 @@ def run_piv_case(
         integrator=integrator,
         fluid=fluid,
         run=run,
-        reference=None if reference is None else reference.render,
+        reference=[r.render for r in candidates]
+        if isinstance(reference, (list, tuple))
+        else (None if reference is None else reference.render),
         sensor=sensor,
         mie=mie,
         progress=progress,
     )
     middle = time.perf_counter()
+    reference = next((r for r in candidates if r.render is render.reference), None)
     if reference is None:
         uniform_vectors = analyze_pair(*render.uniform.images, settings)
         reference = PivCaseReference(render.reference, settings, uniform_vectors)
@@ -630,8 +637,9 @@ def run_study_cases(
     """The PIV case files of a study: one per case, atomic and resumable.
 
     A case whose file has no :func:`case_file_problem` is kept (unless ``force``); the
-    others are measured (one line saying why), all on the tracers, truth and
-    uniform-medium vectors of the first one measured.
+    others are measured (one line saying why), each on the tracers, truth and
+    uniform-medium vectors of an earlier case made for its configuration (a plane camera:
+    the first case's; a lens, focused in each case's mean index: its own).
 
     Parameters
     ----------
@@ -666,7 +674,7 @@ def run_study_cases(
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise RimclError(f"cannot create {folder}: {exc.strerror}") from None
-    paths, ran, reference = [], [], None
+    paths, ran, references = [], [], []
     for index, (name, argument) in enumerate(cases, start=1):
         path = study_case_path(out_dir, name)
         paths.append(path)
@@ -682,11 +690,12 @@ def run_study_cases(
             study.field_path or None,
             case=argument,
             piv=piv,
-            reference=reference,
+            reference=references,
             progress=progress,
             **configs,
         )
-        reference = case.reference
+        if all(r is not case.reference for r in references):
+            references.append(case.reference)
         if before_write is not None:
             before_write()
         write_piv_case(path, case, overwrite=True, record=record)

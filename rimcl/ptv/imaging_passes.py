@@ -18,6 +18,7 @@ from rimcl.core.errors import RimclError
 from rimcl.imaging.centroid import TracerFlag
 from rimcl.imaging.frames import empty_columns, image_batch
 from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS
+from rimcl.optics.aiming import aim_origins
 from rimcl.optics.straight import straight_path_limit, straight_rays
 from rimcl.optics.trace import STATUS_NAMES
 from rimcl.optics.tracing import trace_rays
@@ -63,8 +64,14 @@ def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None
         ``sampler`` (a :class:`RaySampler`), ``canvas`` (a :class:`FrameImage`) and
         ``bar`` (a progress bar), each optional.
     """
+    # a lens's rays aimed at its pupil through this field (the same aim for both engines)
+    start = time.perf_counter()
+    aim_from = aim_origins(setup.camera, field, positions, setup.trace_options)
+    setup.timings["trace"] += time.perf_counter() - start
     if setup.engine is not None:
-        setup.engine.image_frame(setup, pass_, frame, field, positions, scales, extras)
+        setup.engine.image_frame(
+            setup, pass_, frame, field, positions, scales, extras, aim_from=aim_from
+        )
         return
     extras = extras or {}
     camera, scene, timings = setup.camera, setup.scene, setup.timings
@@ -72,7 +79,7 @@ def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None
     for first in range(0, len(positions), setup.batch):
         ids = np.arange(first, min(first + setup.batch, len(positions)))
         origins = np.repeat(scene.in_sheet(positions[ids]), rays, axis=0)
-        directions = camera.directions(positions[ids]).reshape(-1, 3)
+        directions = camera.directions(aim_from[ids]).reshape(-1, 3)
         start = time.perf_counter()
         if field.is_uniform:  # the reference medium, G = 0: straight lines, no steps
             options = setup.trace_options

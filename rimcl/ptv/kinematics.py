@@ -94,3 +94,25 @@ def kinematics_tables(ids, positions, truth, flags, notes, dt, time_config):
         tables["velocity_fit"] = _frame_rows(ids, centres, u_columns, flags, notes, span)
         tables["acceleration_fit"] = _frame_rows(ids, centres, a_columns, flags, notes, span)
     return tables
+
+
+def add_variant_columns(tables, variant_tables, suffix):
+    """Join a variant's reference and measured estimates and flags to the main tables.
+
+    Parameters
+    ----------
+    tables : dict
+        :func:`kinematics_tables` of the measurement; its tables gain the columns
+        ``<q>_ref_<suffix>``, ``<q>_meas_<suffix>`` and ``flags_<suffix>``.
+    variant_tables : dict
+        :func:`kinematics_tables` of the same tracers and frames located another way
+        (the same rows in the same order).
+    suffix : str
+    """
+    for group, table in tables.items():
+        if table is None:
+            continue
+        variant = variant_tables[group]
+        for name, values in variant.items():
+            if name.endswith(("_ref", "_meas")) or name == "flags":
+                table[f"{name}_{suffix}"] = values

@@ -24,10 +24,11 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.fields.crop import CroppedSource
 from rimcl.imaging.centroid import EXCLUDING, NOTES, TracerFlag, flag_names
+from rimcl.imaging.frames import THRESHOLD_VARIANTS
 from rimcl.imaging.render import FrameImage
 from rimcl.ptv.field_source import case_of, open_source, reference_step
 from rimcl.ptv.imaging_passes import TRACKING_SUBSTEPS, RaySampler, make_measured, make_reference
-from rimcl.ptv.kinematics import kinematics_tables
+from rimcl.ptv.kinematics import add_variant_columns, kinematics_tables
 from rimcl.ptv.render_file import SCHEMA, SCHEMA_VERSION, RenderResult
 from rimcl.ptv.run_setup import resolve_setup
 from rimcl.scene.config import MeasureConfig
@@ -196,6 +197,22 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
     }
     truth = {"velocity": reference.true_velocity, "acceleration": reference.true_acceleration}
     kinematics = kinematics_tables(ids, positions, truth, flags, notes, setup.dt, setup.time)
+    for suffix, _ in THRESHOLD_VARIANTS:
+        # the same tracers located at another threshold in the same images: their own
+        # positions, flags and kinematics (columns <name>_<suffix>)
+        variant = {"true": reference.tracks}
+        for kind, images in (("ref", ref), ("meas", meas)):
+            x2, x3 = images[f"x2_{suffix}"], images[f"x3_{suffix}"]
+            tracers[f"x2_{kind}_{suffix}"], tracers[f"x3_{kind}_{suffix}"] = rows(x2), rows(x3)
+            variant[kind] = np.stack([x2, x3], axis=-1)
+        every = ref[f"flags_{suffix}"] | meas[f"flags_{suffix}"] | truth_flags
+        variant_flags = every & int(EXCLUDING)
+        tracers[f"flags_{suffix}"] = rows(variant_flags)
+        add_variant_columns(
+            kinematics,
+            kinematics_tables(ids, variant, truth, variant_flags, notes, setup.dt, setup.time),
+            suffix,
+        )
     if reference.true_velocity is not None:
         for name, values in (("u", reference.true_velocity), ("a", reference.true_acceleration)):
             tracers[f"{name}2_true"] = rows(values[..., 0])

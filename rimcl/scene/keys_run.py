@@ -33,18 +33,20 @@ def run_keys():
             "numerics",
             True,
             "bool",
-            "with the figures, the paper's Appendix A check: one case (C1) at half the step "
-            "and on every second grid node, its |ε_x| PDFs in figures/numerics.png",
+            "with the figures, the paper's Appendix A check: one case (C1) at a half and a "
+            "quarter of the step and on every second and fourth grid node, its |ε_x| PDFs "
+            "and Richardson's estimate of a finer step and grid in figures/numerics.png",
         ),
         SceneKey(
             "run",
             "sensitivity",
             False,
             "bool",
-            "measure every case again with the threshold halved and doubled, the other "
-            "interpolation and 4 times the rays (4 studies more): the sensitivity band of "
-            "each headline number in summary.md (without it: only the excluded tracers "
-            "counted by their optics error)",
+            "measure every case again with the other interpolation and 4 times the rays "
+            "(2 studies more): their part of the sensitivity band of each headline number "
+            "in summary.md (without it the band holds the threshold halved and doubled, "
+            "located in the same images, and the excluded tracers counted by their optics "
+            "error)",
         ),
         SceneKey(
             "run",

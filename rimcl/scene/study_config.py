@@ -143,7 +143,7 @@ class StudyConfig:
                 numerics=run["numerics"],
                 sensitivity=run["sensitivity"],
             ),
-            dt_multiples=tuple(scene["time"]["dt_multiples"]),
+            dt_multiples=dt_multiples(scene["time"]),
             piv=PivStudyConfig(**scene["piv"]),
             lpt=lpt_config(scene, where),
             scene_json=json.dumps(scene),
@@ -174,3 +174,10 @@ class StudyConfig:
     def text(self):
         """The scene as TOML (:func:`rimcl.scene.load.scene_text`), for ``scene.toml``."""
         return scene_text(self.scene_record())
+
+
+def dt_multiples(time):
+    """The Δt sweep's multiples of a scene's ``[time]``: those listed, or every ``m`` from 1
+    to ``time.frames - 1`` (the default)."""
+    listed = time["dt_multiples"]
+    return tuple(range(1, int(time["frames"]))) if listed is None else tuple(listed)

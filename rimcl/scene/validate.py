@@ -161,7 +161,7 @@ def _check_combinations(scene, raw, where):
             f"time.fit_order = {time['fit_order']} in {where} needs more than that many "
             f"frames in its window (time.fit_window = {window})"
         )
-    too_far = [m for m in time["dt_multiples"] if m > frames - 1]
+    too_far = [m for m in time["dt_multiples"] or () if m > frames - 1]
     if too_far:
         raise RimclError(
             f"time.dt_multiples {too_far} in {where} ask for frames {too_far[0]} apart, but "

@@ -48,7 +48,7 @@ from rimcl.stats.error_blocks import (
 )
 from rimcl.stats.peaks import discrete_mode, pdf_peak
 from rimcl.stats.render_file import OPTICS_COLUMNS, load_render
-from rimcl.stats.sensitivity import EXCLUDED_BY_OPTICS, bands, headline_values
+from rimcl.stats.sensitivity import bands, file_variants
 from rimcl.stats.summaries import CONDITION_FRACTION, finite_or_none
 from rimcl.stats.tables import NOTE_COLUMN, area_changes, flagged_tracers, rows_of, write_json
 from rimcl.stats.units import case_units, write_tidy
@@ -215,8 +215,9 @@ def case_statistics(tables):
     case["convergence"] = convergence(tables, kept, blocks, refraction)
     case["budget_verdict"] = budget_verdict(case)
     case["units"] = case_units(tables, case=case)
-    # the method's part of the uncertainty: here the variant that needs no measurement
-    variants = {EXCLUDED_BY_OPTICS: headline_values(tables, excluded_by_optics=True)}
+    # the method's part of the uncertainty: the variants the file holds (the excluded
+    # tracers by their optics, the thresholds ×½ and ×2 located in the same images)
+    variants = file_variants(tables)
     case["sensitivity"] = {"variants": variants, "bands": bands(case, variants)}
     case["rays"] = {
         "n_rays": rays_total,

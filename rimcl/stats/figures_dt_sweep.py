@@ -44,7 +44,7 @@ def dt_sweep_data(stats_by_dt):
     -------
     dict
         ``dt`` (sorted), and per case name and quantity (``velocity``, ``acceleration``,
-        and the ``_fit`` ones where every study has them) the lists ``refraction``,
+        and the ``_fit`` ones, each where two studies have it at least) the lists ``refraction``,
         ``refraction_ci95``, ``baseline``, ``baseline_ci95`` (one entry per Δt, ``None``
         where missing), ``dominates`` (refraction above baseline at that Δt, ``None`` where
         unknown), ``wholly_above`` (the refraction interval wholly above the baseline's),
@@ -55,10 +55,12 @@ def dt_sweep_data(stats_by_dt):
     names = []
     for document in documents:
         names += [case["name"] for case in document["cases"] if case["name"] not in names]
+    # a quantity some Δt lacks (an acceleration needs 2m + 1 frames) is drawn where there
+    # are two Δt values of it at least
     quantities = [
         (group, component)
         for group, component in DT_SWEEP_QUANTITIES
-        if all(any(group in case for case in doc["cases"]) for doc in documents)
+        if sum(any(group in case for case in doc["cases"]) for doc in documents) >= 2
     ]
     cases = {}
     for name in names:

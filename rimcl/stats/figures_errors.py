@@ -54,15 +54,17 @@ def draw_position_error(all_tables, cases):
             ax_pdf.plot([], [], color=color, label=case_label(case) + note)
             continue
         ax_pdf.plot(grid, density, color=color, label=case_label(case))
-        peak = entry["peak_over_L"]
-        ax_pdf.plot(
-            peak, np.interp(np.log10(peak), np.log10(grid), density), "o", color=color, mec="k"
-        )
+        # every competing mode (one where the PDF has a single peak)
+        modes = case.get("position_error_modes_over_L") or [entry["peak_over_L"]]
+        entry["modes_over_L"] = modes
+        for mode in modes:
+            height = np.interp(np.log10(mode), np.log10(grid), density)
+            ax_pdf.plot(mode, height, "o", color=color, mec="k")
     ax_pdf.set_xscale("log")
     ax_pdf.set_xlabel("position error |ε_x| / L")
     ax_pdf.set_ylabel("PDF of log10(|ε_x| / L)")
     ax_pdf.grid(True, which="major", alpha=0.3)
-    ax_pdf.legend(fontsize=6, title="dots: PDF peaks", title_fontsize=6)
+    ax_pdf.legend(fontsize=6, title="dots: PDF peaks (two: two modes)", title_fontsize=6)
     # µm per L where the scene gives the field's size (field.length_m); every case one field
     first = all_tables[0] if all_tables else None
     um_per_l = (
@@ -74,19 +76,25 @@ def draw_position_error(all_tables, cases):
     panel_title(ax_pdf, "a", "PDF of the position error, per case")
 
     def position(key):
+        # no one peak where two modes compete: its value and interval jump between them
+        ambiguous = key == "position_error_peak_over_L"
         return lambda case: (
             None
-            if case[key] is None
+            if case[key] is None or (ambiguous and case.get("position_error_peak_ambiguous"))
             else {"value": case[key], "ci95": {"value": case[f"{key}_ci95"]}}
         )
 
     positive = [c for c in cases if c["G"] > 0]
+    two_modes = [c["name"] for c in positive if c.get("position_error_peak_ambiguous")]
+    peak_label = "PDF peak of |ε_x| / L" + (
+        f" (none: two modes at {', '.join(two_modes)})" if two_modes else ""
+    )
     data = statistic_against_g(
         ax_peak,
         positive,
         [
             (
-                "PDF peak of |ε_x| / L",
+                peak_label,
                 position("position_error_peak_over_L"),
                 {"marker": "o", "color": "k"},
             ),

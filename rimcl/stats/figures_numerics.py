@@ -1,5 +1,6 @@
-"""The numerics figure (the paper's Appendix A): PDFs of |ε_x| / L at two integration steps
-and two grid resolutions.
+"""The numerics figure (the paper's Appendix A): PDFs of |ε_x| / L at three integration steps
+(the study's, half and a quarter of it) and three grid resolutions (the data's, every second
+and every fourth node), with Richardson's estimate of what a finer step or grid would change.
 """
 
 from pathlib import Path
@@ -11,7 +12,7 @@ from rimcl.stats.figures_common import new_figure, save_figure
 
 
 def write_numerics_figure(numerics, out_dir, versions, overwrite=True, name="numerics"):
-    """The paper's Appendix A figure: PDFs of ``|ε_x| / L`` at two steps and two grids.
+    """The paper's Appendix A figure: PDFs of ``|ε_x| / L`` at three steps and three grids.
 
     Parameters
     ----------
@@ -34,16 +35,16 @@ def write_numerics_figure(numerics, out_dir, versions, overwrite=True, name="num
     panels = {}
     if positive:
         edges = np.logspace(np.log10(min(positive)) - 0.1, np.log10(max(positive)) + 0.1, 21)
-        for ax, (letter, pair, what) in zip(
+        for ax, (letter, pair, what, check) in zip(
             np.ravel(axes),
             (
-                ("a", ("step h", "step h/2"), "integration step"),
-                ("b", ("grid n", "grid n/2"), "grid resolution"),
+                ("a", ("step h", "step h/2", "step h/4"), "integration step", "step"),
+                ("b", ("grid n", "grid n/2", "grid n/4"), "grid resolution", "grid"),
             ),
             strict=True,
         ):
             series = []
-            for run_name, color in zip(pair, ("k", "tab:orange"), strict=True):
+            for run_name, color in zip(pair, ("k", "tab:orange", "tab:blue"), strict=True):
                 run = runs[run_name]
                 grid = "×".join(str(n) for n in run["grid_n3_n2_n1"][::-1])
                 label = f"{run_name} (Δ = {run['step']:.3g}, {grid})"
@@ -70,15 +71,39 @@ def write_numerics_figure(numerics, out_dir, versions, overwrite=True, name="num
             ax.xaxis.set_minor_formatter(NullFormatter())
             ax.set_xlabel("|ε_x| / L")
             ax.set_ylabel("PDF of log10(|ε_x| / L)")
-            ax.set_title(f"({letter}) {numerics['case']}: {what}", loc="left", fontsize="medium")
-            ax.set_ylim(0, 1.7 * ax.get_ylim()[1])
+            finer = _richardson_line(numerics, check, pair)
+            ax.set_title(
+                f"({letter}) {numerics['case']}: {what}\n{finer}", loc="left", fontsize="small"
+            )
+            ax.set_ylim(0, 2.2 * ax.get_ylim()[1])  # room for the six-line legend
             ax.legend(fontsize="x-small", loc="upper left")
             panels[letter] = {"bin_edges": edges.tolist(), "series": series}
     figure.suptitle(
-        "Appendix A: the position error at two integration steps and two grid resolutions"
+        "Appendix A: the position error at three integration steps and three grid resolutions"
         if positive
         else "Appendix A: no position errors to compare"
     )
-    data = {"panels": panels, "ratios": {k: v for k, v in numerics.items() if "ratio" in k}}
+    data = {
+        "panels": panels,
+        "ratios": {k: v for k, v in numerics.items() if k.endswith("ratio")},
+        "richardson": {k: v for k, v in numerics.items() if k.endswith("richardson")},
+    }
     record = {"config": {"numerics": {"case": numerics["case"]}}, "versions": versions}
     return save_figure(figure, name, data, record, out_dir, overwrite)
+
+
+def _richardson_line(numerics, check, runs):
+    """What a finer step or grid would change, in words (centroids; optics in brackets)."""
+    medians = {numerics["runs"][name]["median_over_L"] for name in runs}
+    parts = []
+    for prefix, what in (("", "median"), ("optics_", "optics")):
+        estimate = numerics.get(f"{prefix}{check}_richardson")
+        if estimate:
+            parts.append(
+                f"{what} {100 * estimate['relative_change']:.2g} % (order {estimate['order']:.2g})"
+            )
+        elif prefix == "" and len(medians) == 1:
+            parts.append(f"{what} unchanged")
+        else:
+            parts.append(f"{what} n/a: its changes do not shrink")
+    return f"a finer {check} (Richardson) would move the\n" + ";\n".join(parts)

@@ -133,3 +133,39 @@ def discrete_mode(values, resolution):
     bins = np.round(sample / width).astype(np.int64)
     found, counts = np.unique(bins, return_counts=True)
     return float(found[np.argmax(counts)] * width)
+
+
+#: A second local maximum of a PDF competes with the highest from this share of its height
+#: on (the bootstrap of the peak then jumps between the two: C4 of the default study,
+#: whose two modes stand at 0.83 of each other's height with a dip of 7 % between).
+SECOND_MODE_SHARE = 0.5
+
+
+def pdf_modes(grid, density):
+    """The modes of a PDF that compete with its highest: ``[highest, others...]``.
+
+    A local maximum competes when its height is at least :data:`SECOND_MODE_SHARE` of the
+    highest. With more than one, a single "peak" is not defined: its bootstrap jumps
+    between them.
+
+    Parameters
+    ----------
+    grid, density : ndarray, 1-D
+        :func:`rimcl.stats.tables.density_estimate` (ascending grid).
+
+    Returns
+    -------
+    list of float
+        Grid positions, the highest first; empty for fewer than 3 points.
+    """
+    density = np.asarray(density, dtype=np.float64)
+    if density.size < 3:
+        return []
+    inner = np.flatnonzero((density[1:-1] > density[:-2]) & (density[1:-1] >= density[2:])) + 1
+    top = int(np.argmax(density))
+    others = [
+        int(i)
+        for i in inner[np.argsort(density[inner])[::-1]]
+        if i != top and density[i] >= SECOND_MODE_SHARE * density[top]
+    ]
+    return [float(grid[i]) for i in (top, *others)]

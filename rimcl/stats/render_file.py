@@ -14,6 +14,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.core.tables_h5 import read_table
+from rimcl.imaging.frames import THRESHOLD_VARIANTS
 from rimcl.stats.tables import NOTE_COLUMN
 
 RENDER_SCHEMA = "render"
@@ -58,6 +59,20 @@ OPTICS_COLUMNS = {
     "u": ("u2_opt", "u3_opt", "u2_opt_ref", "u3_opt_ref"),
     "a": ("a2_opt", "a3_opt", "a2_opt_ref", "a3_opt_ref"),
 }
+#: Suffixes of the columns of the tracers located again at other thresholds in the same
+#: images (:data:`rimcl.imaging.frames.THRESHOLD_VARIANTS`).
+THRESHOLD_SUFFIXES = tuple(suffix for suffix, _ in THRESHOLD_VARIANTS)
+
+
+def threshold_columns(symbol, suffix):
+    """The optional columns of one variant threshold in a group of quantity ``symbol``
+    (``x``, ``u`` or ``a``), all or none: reference and measured, and the variant's flags."""
+    return (
+        *(f"{symbol}{c}_{kind}_{suffix}" for kind in ("ref", "meas") for c in (2, 3)),
+        f"flags_{suffix}",
+    )
+
+
 #: Kinematic groups of a render file: (group, symbol, columns, required from this many frames).
 #: The ``_fit`` groups (sliding polynomial fit over several frames) are optional.
 KINEMATIC_GROUPS = (
@@ -220,8 +235,9 @@ def load_render(path):
             raise RimclError(f"{path}: root attributes {', '.join(missing)} are missing")
         if "tracers" not in h5file:
             raise RimclError(f"{path}: group 'tracers' is missing (not a rimcl render file?)")
+        variants = [threshold_columns("x", suffix) for suffix in THRESHOLD_SUFFIXES]
         tracers = _read_group(
-            h5file, "tracers", TRACER_COLUMNS, path, (OPTICS_COLUMNS["x"], TRUTH_COLUMNS)
+            h5file, "tracers", TRACER_COLUMNS, path, (OPTICS_COLUMNS["x"], TRUTH_COLUMNS, *variants)
         )
         if tracers["id"].size == 0:
             raise RimclError(f"{path}: the tracer table is empty")
@@ -229,8 +245,9 @@ def load_render(path):
         kinematic = {}
         for group, symbol, columns, needed_from in KINEMATIC_GROUPS:
             if group in h5file:
+                variants = [threshold_columns(symbol, suffix) for suffix in THRESHOLD_SUFFIXES]
                 kinematic[group] = _read_group(
-                    h5file, group, columns, path, (OPTICS_COLUMNS[symbol],)
+                    h5file, group, columns, path, (OPTICS_COLUMNS[symbol], *variants)
                 )
             elif needed_from is not None and frames >= needed_from:
                 raise RimclError(

@@ -7,19 +7,23 @@ number gets the same number under each variant and a verdict: *stable* where eve
 lies inside the bootstrap 95 % interval, else *depends on X by Y %* (the variant that moves
 it most, relative to the number).
 
-Variants:
+Variants every study computes from the case's own file (no measurement again):
 
-- ``excluded by optics`` (always; no measurement): the tracers the study leaves out
-  (flagged) counted with their optics error (the light-weighted mean of their ray image
-  points, against the reference's), the kept ones with their full error;
-- ``threshold ×½``, ``threshold ×2``, the other interpolation, ``rays ×4``: the case
-  measured again with that one setting changed (``rimcl study --sensitivity``;
-  :mod:`rimcl.study.sensitivity`), summarised by :func:`headline_values`.
+- ``excluded by optics``: the tracers the study leaves out (flagged) counted with their
+  optics error (the light-weighted mean of their ray image points, against the
+  reference's), the kept ones with their full error;
+- ``threshold ×½``, ``threshold ×2``: every tracer located again at that threshold in the
+  same digitised images (reference and measured; columns ``*_threshold_half``,
+  ``*_threshold_double`` of the render file), with its own exclusions and kinematics.
+
+Variants that measure the case again (``rimcl study --sensitivity``;
+:mod:`rimcl.study.sensitivity`), summarised by :func:`headline_values`: the other
+interpolation and ``rays ×4``.
 """
 
 import numpy as np
 
-from rimcl.stats.render_file import OPTICS_COLUMNS
+from rimcl.stats.render_file import OPTICS_COLUMNS, THRESHOLD_SUFFIXES, threshold_columns
 from rimcl.stats.tables import flagged_tracers, position_error_vectors, rows_of
 
 #: Headline numbers followed: (stats path, group, component). Position: median |ε_x| / L;
@@ -34,8 +38,15 @@ HEADLINES = (
 
 #: The variant computed from the case's own file.
 EXCLUDED_BY_OPTICS = "excluded by optics"
+#: The variants located again in the case's own images: ``{name: column suffix}``.
+THRESHOLD_NAMES = dict(zip(("threshold ×½", "threshold ×2"), THRESHOLD_SUFFIXES, strict=True))
+#: The variants every study computes from the case's file.
+FILE_VARIANTS = (EXCLUDED_BY_OPTICS, *THRESHOLD_NAMES)
+#: A move below this (percent of the number) reads plain "stable"; a larger one inside the
+#: interval is named beside it.
+STILL_PERCENT = 0.5
 #: The variants that measure the case again (:mod:`rimcl.study.sensitivity`).
-MEASURED_VARIANTS = ("threshold ×½", "threshold ×2", "the other interpolation", "rays ×4")
+MEASURED_VARIANTS = ("the other interpolation", "rays ×4")
 
 
 def _rms_ratio(error, truth):
@@ -52,7 +63,7 @@ def _median_over_length(vectors, length):
     return float(np.median(magnitude) / length) if magnitude.size else None
 
 
-def headline_values(tables, excluded_by_optics=False):
+def headline_values(tables, excluded_by_optics=False, threshold=None):
     """The :data:`HEADLINES` numbers of one case, without intervals.
 
     Parameters
@@ -61,16 +72,27 @@ def headline_values(tables, excluded_by_optics=False):
     excluded_by_optics : bool
         Count the excluded (flagged) tracers too, with their optics error
         (``opt - opt_ref``) in place of the measured one; needs the optics columns.
+    threshold : str, optional
+        A suffix of :data:`rimcl.stats.render_file.THRESHOLD_SUFFIXES`: the tracers as
+        located at that threshold (their positions, kinematics and exclusions); needs
+        the file's columns of that threshold.
 
     Returns
     -------
-    dict of str to float or None
-        ``{path: value}``; None where nothing was measured (or no optics columns).
+    dict
+        ``{path: value}`` (None where nothing was measured, or without the columns it
+        needs) and ``n_used``, the tracers counted (None without the columns).
     """
-    excluded, _ = flagged_tracers(tables)
+    suffix = "" if threshold is None else f"_{threshold}"
+    flags = f"flags{suffix}"
+    if threshold is not None and not all(
+        name in tables.tracers for name in threshold_columns("x", threshold)
+    ):
+        return {**dict.fromkeys(path for path, _, _ in HEADLINES), "n_used": None}
+    excluded, _ = flagged_tracers(tables, flags)
     all_ids = np.unique(tables.tracers["id"].astype(np.int64))
     kept = np.setdiff1d(all_ids, excluded)
-    values = {}
+    values = {"n_used": int(all_ids.size if excluded_by_optics else kept.size)}
     for path, group, component in HEADLINES:
         if group is None:
             tracers = tables.tracers
@@ -79,7 +101,7 @@ def headline_values(tables, excluded_by_optics=False):
                 values[path] = None
                 continue
             rows = rows_of(tracers, kept)
-            error = position_error_vectors(rows)
+            error = position_error_vectors(rows, f"meas{suffix}", f"ref{suffix}")
             if excluded_by_optics:
                 others = rows_of(tracers, excluded)
                 optics = position_error_vectors(others, "opt", "opt_ref")
@@ -88,13 +110,15 @@ def headline_values(tables, excluded_by_optics=False):
             continue
         table = getattr(tables, group)
         symbol = component[0]
-        if not table or (
-            excluded_by_optics and not all(n in table for n in OPTICS_COLUMNS[symbol])
+        if (
+            not table
+            or (excluded_by_optics and not all(n in table for n in OPTICS_COLUMNS[symbol]))
+            or (threshold is not None and flags not in table)
         ):
             values[path] = None
             continue
         rows = rows_of(table, kept)
-        error = rows[f"{component}_meas"] - rows[f"{component}_ref"]
+        error = rows[f"{component}_meas{suffix}"] - rows[f"{component}_ref{suffix}"]
         truth = rows[f"{component}_true"]
         if excluded_by_optics:
             others = rows_of(table, excluded)
@@ -104,6 +128,17 @@ def headline_values(tables, excluded_by_optics=False):
             truth = np.concatenate([truth, others[f"{component}_true"]])
         values[path] = _rms_ratio(error, truth)
     return values
+
+
+def file_variants(tables):
+    """The headline numbers of the :data:`FILE_VARIANTS` of one case (those whose columns
+    the file has): ``{variant name: headline_values(...)}``."""
+    variants = {EXCLUDED_BY_OPTICS: headline_values(tables, excluded_by_optics=True)}
+    for name, suffix in THRESHOLD_NAMES.items():
+        values = headline_values(tables, threshold=suffix)
+        if values["n_used"] is not None:
+            variants[name] = values
+    return variants
 
 
 def _lookup(case, path):
@@ -135,9 +170,11 @@ def bands(case, variants):
     dict of str to dict
         Per headline path: ``value``, ``ci95``, ``variants`` (``{name: value}``),
         ``relative`` (``{name: value / headline - 1}``), ``stable`` (every variant inside
-        the interval; None without variants or value) and ``text`` ("stable"; "stable
-        against X" while some of the :data:`MEASURED_VARIANTS` were not run; "depends on
-        X by +Y %"; or "n/a").
+        the interval; None without variants or value), ``not_run`` (the
+        :data:`MEASURED_VARIANTS` not measured: the band does not include them) and
+        ``text`` ("stable" where no variant moves it by :data:`STILL_PERCENT`; "stable
+        (X: +Y %)" naming the largest move inside the interval; "depends on X by +Y %";
+        or "n/a").
     """
     result = {}
     for path, _, _ in HEADLINES:
@@ -145,6 +182,7 @@ def bands(case, variants):
         found = {name: values.get(path) for name, values in variants.items()}
         found = {name: v for name, v in found.items() if v is not None}
         entry = {"value": value, "ci95": interval, "variants": found, "relative": {}}
+        entry["not_run"] = [name for name in MEASURED_VARIANTS if name not in variants]
         if value is None or not value or not found:
             entry.update(stable=None, text="n/a")
             result[path] = entry
@@ -154,11 +192,13 @@ def bands(case, variants):
             interval[0] <= v <= interval[1] for v in found.values()
         )
         entry["stable"] = bool(inside)
-        if inside:
-            missing = [name for name in MEASURED_VARIANTS if name not in found]
-            entry["text"] = "stable" if not missing else f"stable against {', '.join(found)}"
-        else:
-            name = max(entry["relative"], key=lambda k: abs(entry["relative"][k]))
-            entry["text"] = f"depends on {name} by {100 * entry['relative'][name]:+.0f} %"
+        name = max(entry["relative"], key=lambda k: abs(entry["relative"][k]))
+        move = 100 * entry["relative"][name]
+        if not inside:
+            entry["text"] = f"depends on {name} by {move:+.0f} %"
+        elif abs(move) < STILL_PERCENT:
+            entry["text"] = "stable"
+        else:  # inside the interval, but how far the settings move it still shows
+            entry["text"] = f"stable ({name}: {move:+.0f} %)"
         result[path] = entry
     return result

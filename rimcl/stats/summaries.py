@@ -12,7 +12,8 @@ import math
 import numpy as np
 
 from rimcl.stats.bootstrap import bootstrap_intervals, own_bootstrap, weighted_quantiles
-from rimcl.stats.peaks import kde_modes, pdf_peak, scott_bandwidth
+from rimcl.stats.peaks import kde_modes, pdf_modes, pdf_peak, scott_bandwidth
+from rimcl.stats.tables import density_estimate
 
 #: The statistics of one error summary (besides ``n``), in the order they are printed.
 SUMMARY_KEYS = ("systematic", "random", "median", "iqr", "rms_normalized")
@@ -165,13 +166,16 @@ def position_summary(vectors, ids, length, pixel_size, bootstrap=None):
         0 when every error is exactly 0; ``None`` for no finite error),
         ``position_error_peak_px``, ``position_error_median_over_L``, and for each of
         them ``<key>_ci95`` (``[lo, hi]`` or ``None``). The peak's bootstrap keeps the
-        full sample's bandwidth.
+        full sample's bandwidth. ``position_error_modes_over_L``: the PDF's competing
+        modes (:func:`rimcl.stats.peaks.pdf_modes`), ``position_error_peak_ambiguous``:
+        more than one (the peak is then not one number).
     """
     values = np.hypot(*vectors) / length
     finite = np.isfinite(values)
     order = np.argsort(values[finite], kind="stable")  # the median's resamples need it
     values, ids = values[finite][order], np.asarray(ids, dtype=np.int64)[finite][order]
     peak = pdf_peak(values, log=True)
+    modes = pdf_modes(*density_estimate(values, log=True))
     median = finite_or_none(np.median(values)) if values.size else None
     peak_ci = median_ci = None
     if values.size:
@@ -203,4 +207,8 @@ def position_summary(vectors, ids, length, pixel_size, bootstrap=None):
         "position_error_peak_px_ci95": None if peak_ci is None else [v * to_px for v in peak_ci],
         "position_error_median_over_L": median,
         "position_error_median_over_L_ci95": median_ci,
+        # a PDF with two modes of comparable height has no one peak: its value and
+        # interval jump between them (the figure and summary say so; the median holds)
+        "position_error_modes_over_L": modes,
+        "position_error_peak_ambiguous": len(modes) > 1,
     }

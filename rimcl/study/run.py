@@ -603,12 +603,15 @@ def write_study_outputs(
                 else:
                     stats["dt_sweep"] = dt_sweep_data(by_dt)
     if piv_files:
+        from rimcl.piv.comparison import side_by_side
         from rimcl.piv.figures import write_piv_figures
         from rimcl.piv.study import add_study_results
         from rimcl.study.answer import piv_units
 
         piv_cases = add_study_results(stats, piv_files)
         for case in stats["cases"]:
+            if "piv_vs_ptv" in case:  # what each measured with: like for like or not
+                case["piv_vs_ptv"]["settings"] = side_by_side(study, case, case["piv"])
             if "piv" in case:
                 case["piv"]["units"] = piv_units(
                     case["piv"], study.shared.camera.length_m, study.shared.time.time_s

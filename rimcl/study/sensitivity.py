@@ -1,13 +1,14 @@
 """The study's costly sensitivity variants: each case measured again with one setting changed.
 
-``rimcl study --sensitivity`` (scene key ``run.sensitivity``) measures every case four more
-times, each with one setting a user could reasonably choose differently: the threshold
-halved and doubled, the other interpolation (trilinear ↔ bspline3) and four times the rays
-per tracer. The render files go to ``sensitivity/<variant>/cases/<case>.h5`` (kept between runs
+Every study carries the variants that need no new measurement (the excluded tracers counted
+by their optics error; the threshold ×½ and ×2, located again in the same images:
+:mod:`rimcl.stats.sensitivity`). ``rimcl study --sensitivity`` (scene key
+``run.sensitivity``) measures every case twice more, each with one setting that changes
+the tracing: the other interpolation (trilinear ↔ bspline3) and four times the rays per
+tracer. The render files go to ``sensitivity/<variant>/cases/<case>.h5`` (kept between runs
 like the cases'); their headline numbers (:func:`rimcl.stats.sensitivity.headline_values`)
-join the case's ``sensitivity`` entry in ``stats.json`` beside the variant every study
-computes (the excluded tracers counted by their optics error), and the verdicts are made
-again (:func:`rimcl.stats.sensitivity.bands`). Each variant costs about one study.
+join the case's ``sensitivity`` entry in ``stats.json`` and the verdicts are made again
+(:func:`rimcl.stats.sensitivity.bands`). Each variant costs about one study.
 """
 
 import copy
@@ -19,7 +20,7 @@ from rimcl.study.case_files import case_path, check_case_file
 VARIANTS = tuple(
     zip(
         MEASURED_VARIANTS,
-        ("threshold_half", "threshold_double", "interpolation", "rays_x4"),
+        ("interpolation", "rays_x4"),
         strict=True,
     )
 )
@@ -28,13 +29,7 @@ VARIANTS = tuple(
 def variant_scene(scene, directory):
     """The scene with one setting changed (``directory`` of :data:`VARIANTS`)."""
     changed = copy.deepcopy(scene)
-    if directory in ("threshold_half", "threshold_double"):
-        factor = 0.5 if directory == "threshold_half" else 2.0
-        changed["renderer"]["threshold"] *= factor
-        changed["cases"]["thresholds"] = {
-            case: factor * value for case, value in scene["cases"]["thresholds"].items()
-        }
-    elif directory == "interpolation":
+    if directory == "interpolation":
         current = scene["integrator"]["interp"]
         changed["integrator"]["interp"] = "trilinear" if current == "bspline3" else "bspline3"
     elif directory == "rays_x4":

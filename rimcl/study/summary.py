@@ -12,6 +12,8 @@ import math
 from datetime import datetime, timezone
 
 from rimcl import __version__
+from rimcl.piv.comparison import COMPARED
+from rimcl.stats.sensitivity import FILE_VARIANTS, MEASURED_VARIANTS, THRESHOLD_NAMES
 from rimcl.stats.summaries import INFLUENCE_LIMIT
 from rimcl.study.answer import answer_lines, lens_lines, scene_warnings, warning_lines
 
@@ -145,18 +147,27 @@ def _case_row(case, block=None):
         number(case["G"]),
         number(case["delta_n_max"]),
         f"{case['n_used']}/{case['n_tracers']}",
-        _marked(
-            case,
-            "position_error_peak_over_L",
-            with_interval(
-                case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
-            ),
-        ),
+        _peak_cell(case),
         _ratio_cell(case, f"{prefix}velocity.u3.systematic", velocity, "systematic"),
         _ratio_cell(case, f"{prefix}velocity.u3.random", velocity, "random"),
         _ratio_cell(case, f"{prefix}acceleration.a3.systematic", acceleration, "systematic"),
         _ratio_cell(case, f"{prefix}acceleration.a3.random", acceleration, "random"),
     ]
+
+
+def _peak_cell(case):
+    """The PDF peak of ``|ε_x|/L`` with its interval; where two modes compete, both, said."""
+    text = _marked(
+        case,
+        "position_error_peak_over_L",
+        with_interval(
+            case["position_error_peak_over_L"], case.get("position_error_peak_over_L_ci95")
+        ),
+    )
+    if case.get("position_error_peak_ambiguous"):
+        modes = " and ".join(number(m) for m in case["position_error_modes_over_L"])
+        text += f" (two modes, {modes}: no one peak; read the median)"
+    return text
 
 
 def _headline_rows(cases, group, component):
@@ -269,39 +280,62 @@ def _sensitivity_cell(band, path):
     return f"{text}: **{band['text']}**" if band["text"] != "n/a" else text
 
 
+def _kept_cell(case):
+    """Tracers kept at the threshold ×½, ×1 and ×2 (n/a where the file lacks a variant)."""
+    variants = case["sensitivity"]["variants"]
+    counts = [variants.get(name, {}).get("n_used") for name in THRESHOLD_NAMES]
+    counts.insert(1, case["n_used"])
+    return " / ".join("n/a" if n is None else str(n) for n in counts)
+
+
 def _sensitivity_lines(cases, study):
     """Each headline number with its verdict against the settings' variants."""
     with_bands = [case for case in cases if "sensitivity" in case]
     if not with_bands:
         return []
-    ran = sorted({name for case in with_bands for name in case["sensitivity"]["variants"]})
+    ran = [
+        name
+        for name in (*FILE_VARIANTS, *MEASURED_VARIANTS)
+        if any(name in case["sensitivity"]["variants"] for case in with_bands)
+    ]
+    not_run = [name for name in MEASURED_VARIANTS if name not in ran]
     lines = [
         "## Sensitivity to settings",
         "",
         "The bootstrap interval says how a number moves with the tracers; the settings a "
-        "user chooses move it too. Each headline number (refraction errors) under: "
+        "user chooses move it too. Each headline number (refraction errors) is computed "
+        "again under: "
         + ", ".join(f"*{name}*" for name in ran)
-        + ". **stable**: every variant inside the 95 % interval (*stable against X*: only "
-        "X was tried); otherwise *depends on X by Y %* names the variant that moves it "
-        "most. *excluded by optics*: the tracers left out (flagged) counted with their "
-        "optics error. ",
+        + ". **stable**: every one of these inside the 95 % interval (the largest move "
+        "beside it where one moves it by 0.5 % or more); otherwise *depends on X by Y %* "
+        "names the variant that moves it most. *excluded by optics*: the "
+        "tracers left out (flagged) counted with their optics error; *threshold ×½* and "
+        "*×2*: every tracer located again at that threshold in the same digitised images "
+        "(reference and measured; no tracing again), with its own exclusions. ",
     ]
-    if not study.run.sensitivity:
+    if not_run:
         lines[-1] += (
-            "The threshold ×½ and ×2, the other interpolation and rays ×4 need the case "
-            "measured again (4 studies more): `rimcl study --sensitivity`."
+            "The band does not include "
+            + " and ".join(f"*{name}*" for name in not_run)
+            + f", which need each case measured again ({len(not_run)} studies more): "
+            "`rimcl study --sensitivity`."
         )
     else:
         lines[-1] += (
-            "Threshold ×½ and ×2, the other interpolation (trilinear ↔ bspline3) and rays "
-            "×4: each case measured again (`sensitivity/<variant>/cases/<case>.h5`); "
-            "`stats.json`: `sensitivity` per case."
+            "The other interpolation (trilinear ↔ bspline3) and rays ×4: each case measured "
+            "again (`sensitivity/<variant>/cases/<case>.h5`)."
         )
+    lines[-1] += " `stats.json`: `sensitivity` per case."
     lines.append("")
-    header = ["case", *(heading for _, heading in SENSITIVITY_HEADINGS)]
+    header = [
+        "case",
+        "tracers kept (threshold ×½ / ×1 / ×2)",
+        *(heading for _, heading in SENSITIVITY_HEADINGS),
+    ]
     rows = [
         [
             case["name"],
+            _kept_cell(case),
             *(
                 _sensitivity_cell(case["sensitivity"]["bands"].get(path), path)
                 for path, _ in SENSITIVITY_HEADINGS
@@ -431,14 +465,7 @@ def summary_markdown(stats, study):
             number(case["G"]),
             number(case["delta_n_max"]),
             f"{case['n_used']}/{case['n_tracers']}",
-            _marked(
-                case,
-                "position_error_peak_over_L",
-                with_interval(
-                    case["position_error_peak_over_L"],
-                    case.get("position_error_peak_over_L_ci95"),
-                ),
-            ),
+            _peak_cell(case),
             _marked(
                 case,
                 "position_error_median_over_L",
@@ -673,4 +700,46 @@ def piv_lines(stats):
                 number(compared.get("optics_ratio_rms_normalized")),
             ]
         )
-    return [*lines, *_table(header, rows), "", piv_verdict(stats), ""]
+    return [
+        *lines,
+        *_table(header, rows),
+        "",
+        *_settings_lines(cases),
+        piv_verdict(stats),
+        "",
+    ]
+
+
+def _settings_lines(cases):
+    """PTV's and PIV's settings side by side, and whether the ratios compare like for like."""
+    settings = next(
+        (c["piv_vs_ptv"]["settings"] for c in cases if "settings" in c.get("piv_vs_ptv", {})),
+        None,
+    )
+    if settings is None:
+        return []
+    rows = [
+        [name, _setting(settings["ptv"][key]), _setting(settings["piv"][key])]
+        for key, name in COMPARED
+    ]
+    names = dict(COMPARED)
+    if settings["like_for_like"]:
+        verdict = (
+            "PTV and PIV measured **like for like**: the same Δt, camera, pixel, rays and bits."
+        )
+    else:
+        differ = ", ".join(names[key] for key in settings["differ"])
+        verdict = (
+            f"**Not like for like**: PTV and PIV differ in {differ}, so the ratios compare "
+            "the two measurements as set up, not the two methods (a velocity error from a "
+            "position error scales as 1/Δt). Set `[piv]` `dt`, `rays` and `bit_depth` to "
+            "PTV's (`time.dt`, the camera's rays, `renderer.bit_depth`) to compare the "
+            "methods."
+        )
+    return [*_table(["setting", "PTV", "PIV"], rows), "", verdict, ""]
+
+
+def _setting(value):
+    if isinstance(value, bool):
+        return "on" if value else "off"
+    return number(value) if isinstance(value, float) else str(value)
