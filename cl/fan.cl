@@ -47,9 +47,9 @@
  * Work-item: RIMCL_LANES consecutive slots of the batch; fan_directions: one ray.
  * Global size: ceil(n_rays / RIMCL_LANES) (extra items return); fan_directions: n_rays.
  *
- * tracers (B x 4 doubles, or B x 3 with RIMCL_TRACER_DEPTH): tracer positions (x2, x3) on
- *   the sheet and the point (x2, x3) its rays are aimed from (the tracer, or the tracer
- *   minus its aim shift: rimcl/optics/aiming.py), or (x1, x2, x3) aimed from themselves.
+ * tracers (B x 4 doubles, or B x 5 with RIMCL_TRACER_DEPTH): tracer positions (x2, x3) on
+ *   the sheet, or (x1, x2, x3) at their own depths, then the point (x2, x3) its rays are
+ *   aimed from (the tracer, or the tracer minus its aim shift: rimcl/optics/aiming.py).
  * aims    (K x 3 doubles): the camera's aim points (x1, x2, x3) (a lens: its pupil's).
  * order   (K ints): a permutation of the aim points, the order their rays fill lanes in.
  * camera  (CAM_COUNT doubles, offsets CAM_* below; the CAM_WINDOW_* ones only for 2).
@@ -109,7 +109,7 @@ RIMCL_INLINE void tracer_start(__global const double *tracers, const int t, cons
 #if RIMCL_TRACER_DEPTH
     (void)x_sheet;
     for (int q = 0; q < 3; ++q)
-        start[q] = tracers[3 * t + q];
+        start[q] = tracers[5 * t + q];
 #else
     start[0] = x_sheet;
     start[1] = tracers[4 * t];
@@ -122,10 +122,9 @@ RIMCL_INLINE void aim_start(__global const double *tracers, const int t, const d
                             double *from)
 {
 #if RIMCL_TRACER_DEPTH
-    (void)tracers;
-    (void)t;
-    for (int q = 0; q < 3; ++q)
-        from[q] = start[q];
+    from[0] = start[0];
+    from[1] = tracers[5 * t + 3];
+    from[2] = tracers[5 * t + 4];
 #else
     from[0] = start[0];
     from[1] = tracers[4 * t + 2];

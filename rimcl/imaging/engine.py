@@ -99,18 +99,20 @@ def lane_order(camera):
     return np.argsort(code, kind="stable").astype(np.int32)
 
 
-def tracer_directions(camera, positions):
+def tracer_directions(camera, positions, aim_from=None):
     """Initial unit directions of each tracer's rays from its own position ``(x1, x2, x3)``,
     shape (N, K, 3): what PIV traces across a light sheet (``cl/fan.cl`` with
     ``RIMCL_TRACER_DEPTH`` makes the same on the device).
 
     Aimed from each tracer's own depth at the camera's aim points; a lens behind a window
-    solves its directions from the sheet (:meth:`LensCamera.directions`), which moves the
-    rays of a tracer a fraction of the sheet thickness off the pupil points it aims at:
-    the pupil test after tracing still decides which are collected.
+    solves its directions from the sheet (:meth:`LensCamera.directions`) at ``aim_from``
+    (``(N, 2)``: the aim origins of :func:`rimcl.optics.aiming.aim_origins`; default the
+    tracers' own ``(x2, x3)``), which moves the rays of a tracer a fraction of the sheet
+    thickness off the pupil points it aims at: the pupil test after tracing still decides
+    which are collected.
     """
     if isinstance(camera, LensCamera) and camera.window is not None:
-        return camera.directions(positions[:, 1:])
+        return camera.directions(positions[:, 1:] if aim_from is None else aim_from)
     aim = camera.aim_points()[None, :, :] - positions[:, None, :]
     return aim / np.linalg.norm(aim, axis=-1, keepdims=True)
 

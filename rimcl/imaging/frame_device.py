@@ -115,7 +115,8 @@ class DeviceFrames:
         context = context_for(device)
         size = self.batch * self.rays
         rw = cl.mem_flags.READ_WRITE
-        self.tracers = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.batch * 24)
+        # per tracer (x1, x2, x3) and the (x2, x3) its rays are aimed from (cl/fan.cl)
+        self.tracers = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.batch * 40)
         self.intensity = cl.Buffer(context, cl.mem_flags.READ_ONLY, size=self.batch * 8)
         self.ray_buffers = (
             cl.Buffer(context, rw, size=size * 16),
@@ -132,7 +133,7 @@ class DeviceFrames:
         self.rows_kernel = get_kernel(program, "tracer_rows")
         self.splat_kernel = get_kernel(program, "splat_tiles")
 
-    def expose(self, field, positions, intensity, trace_options, bar=None):
+    def expose(self, field, positions, intensity, trace_options, bar=None, aim_from=None):
         """The light of one frame: every tracer's rays traced through ``field`` and splatted.
 
         Parameters
@@ -146,6 +147,9 @@ class DeviceFrames:
             ``step``, ``interp``, ``precision``.
         bar : optional
             A progress bar, advanced by the tracers of each batch.
+        aim_from : ndarray, float64, shape (N, 2), optional
+            The points ``(x2, x3)`` each tracer's rays are aimed from
+            (:func:`rimcl.optics.aiming.aim_origins`; default the tracers themselves).
 
         Returns
         -------
@@ -165,6 +169,10 @@ class DeviceFrames:
         intensity = np.ascontiguousarray(intensity, dtype=np.float64)
         if positions.ndim != 2 or positions.shape[1] != 3 or len(intensity) != len(positions):
             raise RimclError("give tracer positions (N, 3) and one sheet intensity per tracer")
+        aim_from = positions[:, 1:] if aim_from is None else np.asarray(aim_from, np.float64)
+        if aim_from.shape != (len(positions), 2):
+            raise RimclError("give one aim origin (x2, x3) per tracer")
+        tracers = np.ascontiguousarray(np.concatenate([positions, aim_from], axis=1))
         rows, cols = self.shape
         cl.enqueue_fill_buffer(self.queue, self.light, np.float64(0.0), 0, rows * cols * 8)
         sums = np.zeros((len(positions), 2))
@@ -182,7 +190,7 @@ class DeviceFrames:
                 self._batch(
                     kernel,
                     launch,
-                    positions[ids],
+                    tracers[ids],
                     intensity[ids],
                     totals,
                     sums[ids],
@@ -199,13 +207,13 @@ class DeviceFrames:
         optics[collected == 0] = np.nan
         return light, optics, collected, totals
 
-    def _batch(self, kernel, launch, positions, intensity, totals, sums, collected):
+    def _batch(self, kernel, launch, tracers, intensity, totals, sums, collected):
         import pyopencl as cl
 
-        count = len(positions)
+        count = len(tracers)
         n_rays = count * self.rays
         rows, cols = self.shape
-        cl.enqueue_copy(self.queue, self.tracers, positions)
+        cl.enqueue_copy(self.queue, self.tracers, np.ascontiguousarray(tracers))
         cl.enqueue_copy(self.queue, self.intensity, intensity)
         no_sample = (self.tracers, np.int32(0), self.tracers, self.tracers)
         fan_event = self.fan.enqueue(

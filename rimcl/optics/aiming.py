@@ -34,13 +34,22 @@ MAX_STEP = 8.0
 AIM_TOLERANCE = 1e-7
 
 
+def _starts(scene, positions):
+    """Rays' start points ``(N, 3)``: tracers ``(x2, x3)`` on the sheet, or ``(x1, x2, x3)``
+    each at its own depth (PIV's tracers across a light sheet)."""
+    positions = np.asarray(positions, dtype=np.float64)
+    return positions if positions.shape[-1] == 3 else scene.in_sheet(positions)
+
+
 def chief_misses(camera, field, positions, origins, trace_options):
-    """Where each chief ray aimed from ``origins`` lands on the pupil plane, relative to
-    the pupil centre (``(N, 2)``, field units; NaN where the ray fails or reflects)."""
+    """Where each chief ray aimed from ``origins`` (``(N, 2)``) and started at ``positions``
+    (``(N, 2)`` on the sheet or ``(N, 3)`` at their own depths) lands on the pupil plane,
+    relative to the pupil centre (``(N, 2)``, field units; NaN where the ray fails or
+    reflects)."""
     scene = camera.scene
     result = trace_rays(
         field,
-        scene.in_sheet(positions),
+        _starts(scene, positions),
         camera.chief_directions(origins),
         x_end=scene.x_end,
         **trace_options,
@@ -71,8 +80,9 @@ def aim_origins(camera, field, positions, trace_options, iterations=AIM_ITERATIO
         Only a :class:`LensCamera` aims through the field; any other camera aims from the
         tracers themselves.
     field : Field or AnalyticField
-    positions : ndarray, shape (N, 2)
-        The tracers ``(x2, x3)`` on the sheet.
+    positions : ndarray, shape (N, 2) or (N, 3)
+        The tracers ``(x2, x3)`` on the sheet, or ``(x1, x2, x3)`` each at its own depth
+        (the rays start there; the aim is a shift of ``(x2, x3)``).
     trace_options : dict
         ``step``, ``interp``, ``precision`` and ``device`` of :func:`rimcl.trace_rays`.
     iterations : int
@@ -81,25 +91,27 @@ def aim_origins(camera, field, positions, trace_options, iterations=AIM_ITERATIO
     Returns
     -------
     ndarray, float64, shape (N, 2)
-        ``positions`` itself through a uniform field or for other cameras; else
-        ``positions − Δ``.
+        The tracers' ``(x2, x3)`` themselves through a uniform field or for other
+        cameras; else ``(x2, x3) − Δ``.
     """
     positions = np.asarray(positions, dtype=np.float64)
+    lateral = positions if positions.shape[-1] == 2 else positions[:, 1:]
     uniform = getattr(field, "is_uniform", False)  # an analytic field is never skipped
     if not isinstance(camera, LensCamera) or uniform or not len(positions):
-        return positions
+        return lateral
     radius = 0.5 * camera.pupil.diameter
     step = JACOBIAN_STEP * radius
     probes = np.array([[0.0, 0.0], [step, 0.0], [0.0, step]])
-    shift = np.zeros_like(positions)
+    shift = np.zeros_like(lateral)
     best, best_size = shift.copy(), np.full(len(positions), np.inf)
     # every tracer is traced each step (a fixed number of rays: PoCL compiles its work-group
     # function per launch shape, and a shrinking set cost seconds a step); those already
     # within tolerance keep their shift, and the steps stop once all are
     tripled = np.repeat(positions, 3, axis=0)
+    tripled_lateral = tripled if tripled.shape[-1] == 2 else tripled[:, 1:]
     for _ in range(int(iterations)):
         shifts = (shift[:, None, :] + probes[None]).reshape(-1, 2)
-        miss = chief_misses(camera, field, tripled, tripled - shifts, trace_options)
+        miss = chief_misses(camera, field, tripled, tripled_lateral - shifts, trace_options)
         miss = miss.reshape(len(positions), 3, 2)
         size = np.hypot(*miss[:, 0].T)
         better = size < best_size
@@ -120,4 +132,4 @@ def aim_origins(camera, field, positions, trace_options, iterations=AIM_ITERATIO
         shift[done] = best[done]
         if done.all():
             break
-    return positions - best
+    return lateral - best

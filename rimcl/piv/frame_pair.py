@@ -19,6 +19,7 @@ from scipy.special import ndtr
 from rimcl.core.errors import RimclError
 from rimcl.imaging.engine import tracer_directions
 from rimcl.imaging.sensor import MEASURED_PASS, NoiseKey, Sensor
+from rimcl.optics.aiming import aim_origins
 from rimcl.optics.camera import LensCamera
 from rimcl.optics.trace import STATUS_NAMES
 from rimcl.optics.tracing import trace_rays
@@ -107,8 +108,13 @@ def deposit_rays(light, pixels, weights, renderer):
     return int(np.count_nonzero(np.any((own < 0) | (own >= [cols, rows]), axis=1)))
 
 
-def _expose(field, positions, intensity, camera, scene, renderer, shape, options, batch, mie):
+def _expose(
+    field, positions, intensity, camera, scene, renderer, shape, options, batch, mie, aim_from=None
+):
     """Light of one exposure with NumPy: trace every tracer's rays, deposit them in one frame.
+
+    ``aim_from`` (``(N, 2)``): the points each tracer's rays are aimed from (default: the
+    tracers' own ``(x2, x3)``).
 
     Returns
     -------
@@ -120,6 +126,7 @@ def _expose(field, positions, intensity, camera, scene, renderer, shape, options
         As :meth:`rimcl.imaging.frame_device.DeviceFrames.expose`'s.
     """
     rays = camera.rays_per_tracer
+    aim_from = positions[:, 1:] if aim_from is None else aim_from
     light = np.zeros(shape)
     optics = np.full((len(positions), 2), np.nan)
     collected_count = np.zeros(len(positions), dtype=np.int64)
@@ -132,7 +139,7 @@ def _expose(field, positions, intensity, camera, scene, renderer, shape, options
     for first in range(0, len(positions), batch):
         ids = np.arange(first, min(first + batch, len(positions)))
         start = time.perf_counter()
-        directions = tracer_directions(camera, positions[ids])
+        directions = tracer_directions(camera, positions[ids], aim_from[ids])
         result = trace_rays(
             field,
             np.repeat(positions[ids], rays, axis=0),
@@ -244,6 +251,9 @@ def image_frames(
     shape = imaging.frame_shape(scene, camera)
     batch = max(1, int(rays_per_batch) // camera.rays_per_tracer)
     frames_engine = None
+    # a lens's rays aimed at its pupil through each exposure's field (rimcl.optics.aiming),
+    # the same aim for both engines, traced with the engines' own options
+    aim_options = {"step": None, "interp": "trilinear", "precision": "f32c", **options}
     if engine == "device":
         from rimcl.core.device import select_device
         from rimcl.imaging.frame_device import DeviceFrames
@@ -260,13 +270,26 @@ def image_frames(
     vignetted = off_frame = 0
     for index, (field, where) in enumerate(zip(fields, positions, strict=True)):
         intensity = sheet_intensity(where[:, 0], scene.x_sheet, thickness)
+        started = time.perf_counter()
+        aim_from = aim_origins(camera, field, where, aim_options)
+        seconds["trace"] += time.perf_counter() - started
         if frames_engine is not None:
             light, mean_points, count, totals = frames_engine.expose(
-                field, where, intensity, options, bar
+                field, where, intensity, options, bar, aim_from
             )
         else:
             light, mean_points, count, totals = _expose(
-                field, where, intensity, camera, scene, renderer, shape, options, batch, mie
+                field,
+                where,
+                intensity,
+                camera,
+                scene,
+                renderer,
+                shape,
+                options,
+                batch,
+                mie,
+                aim_from,
             )
             if bar is not None:
                 bar.update(len(where))
