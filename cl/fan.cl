@@ -139,6 +139,11 @@ RIMCL_INLINE void window_direction(__constant const double *camera, const double
     const double guess = reach / camera[CAM_WINDOW_TOTAL];
     const double cap = camera[CAM_WINDOW_CAP];
     double sine = (guess < cap) ? guess : cap;
+    /* Each step is a fixed function of the sine, so once the iterates repeat (a fixed
+     * point, or two values in turn as rounding settles) the host's last iterate is known:
+     * stop there, with its bits, instead of running all LENS_NEWTON_STEPS steps (most rays
+     * settle within a few; NaN never repeats and runs them all). */
+    double before = NAN;
     for (int step = 0; step < LENS_NEWTON_STEPS; ++step) {
         double run = 0.0, slope = 0.0;
         for (int m = 0; m < 3; ++m) {
@@ -149,7 +154,17 @@ RIMCL_INLINE void window_direction(__constant const double *camera, const double
             run = (m == 0) ? term : run + term;
             slope = (m == 0) ? rate : slope + rate;
         }
-        sine = sine - (run - reach) / slope;
+        const double next = sine - (run - reach) / slope;
+        if (next == sine)
+            break;
+        if (next == before) {
+            /* iterate step + 1 is `next`; they alternate from here: the host's last one,
+             * LENS_NEWTON_STEPS, is `next` where it is an even number of steps on */
+            sine = ((LENS_NEWTON_STEPS - step - 1) % 2 == 0) ? next : sine;
+            break;
+        }
+        before = sine;
+        sine = next;
     }
     const double unit2 = (reach > 0.0) ? lateral2 / reach : 0.0;
     const double unit3 = (reach > 0.0) ? lateral3 / reach : 0.0;
