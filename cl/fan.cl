@@ -267,6 +267,9 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
 #if RIMCL_STRAIGHT
     double lane_start[RIMCL_LANES][3], lane_dir[RIMCL_LANES][3];
 #endif
+#if RIMCL_MIE
+    double lane_aim_dir[RIMCL_LANES][3];
+#endif
 #pragma unroll
     for (int k = 0; k < RIMCL_LANES; ++k) {
         const int slot = (first + k < n_rays) ? first + k : n_rays - 1;
@@ -282,8 +285,8 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
         camera_direction(camera, start, aim, d);
 #if RIMCL_MIE
         /* the host weighs the camera's directions, before trace_rays normalises again */
-        if (first + k < n_rays)
-            ray_weight[ray] = mie_weight(mie, mie_terms, d);
+        for (int q = 0; q < 3; ++q)
+            lane_aim_dir[k][q] = d[q];
 #endif
         normalise3(d);
 #if RIMCL_STRAIGHT
@@ -318,6 +321,15 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
 #endif
     }
 
+#if RIMCL_MIE
+    {
+        double weight[RIMCL_LANES];
+        mie_weight_lanes(mie, mie_terms, lane_aim_dir, weight);
+        for (int k = 0; k < RIMCL_LANES; ++k)
+            if (first + k < n_rays)
+                ray_weight[lane_ray[k]] = weight[k];
+    }
+#endif
 #if RIMCL_STRAIGHT
     (void)valid;
     (void)max_steps;
