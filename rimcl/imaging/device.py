@@ -514,7 +514,9 @@ def tune_image(device, *, path=None, rays=256, repeats=3, groups=None, write=Tru
     cpu = bool(device.type & cl.device_type.CPU)
     if groups is None:
         groups = CPU_IMAGE_GROUPS if cpu else GPU_IMAGE_GROUPS
-    groups = [int(g) for g in groups if 0 < int(g) <= device.max_work_group_size]
+    groups = [int(g) for g in groups if 0 < int(g) <= device.max_work_group_size] or [
+        min(rule_image_group(device), int(device.max_work_group_size))
+    ]
     pixel_size = 1 / 512
     imaging = Imaging(Renderer("exact", pixel_size, (0.0, 0.0), 2.0, 64, 12), 200.0)
     queue = profiling_queue(device)
