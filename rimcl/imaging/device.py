@@ -479,7 +479,7 @@ def tune_image(device, *, path=None, rays=256, repeats=3, groups=None, write=Tru
     """Time the image kernel's work-group sizes on ``device``; keep the fastest.
 
     A batch of synthetic tracers (clouds of image points, the exact renderer, σ 2 px,
-    12 bits, at least 256 tracers and one per slot) is imaged once per size, in
+    12 bits, at least 1024 tracers and one per slot) is imaged once per size, in
     interleaved rounds; a size's time is the best of ``repeats`` kernel runs. A size
     whose rows differ in any bit from the first size's is left out (a driver bug; logged).
 
@@ -522,7 +522,7 @@ def tune_image(device, *, path=None, rays=256, repeats=3, groups=None, write=Tru
     queue = profiling_queue(device)
     imagers = {g: DeviceImager(imaging, rays, 256, device, queue, g) for g in groups}
     # every slot busy (a GPU has thousands), within every imager's rows
-    tracers = max(256, *(i.slots for i in imagers.values()))
+    tracers = max(1024, *(i.slots for i in imagers.values()))
     tracers = min(tracers, *(i.max_tracers for i in imagers.values()))
     points = _tuning_batch(np.random.default_rng(0), tracers, rays, pixel_size)
     pixels = np.ascontiguousarray(imaging.renderer.to_pixels(points.reshape(-1, 2)))
