@@ -2,8 +2,9 @@
 
 Two scenes, each through ``engine = "numpy"`` (trace on the device, images tracer by
 tracer in NumPy) and ``engine = "device"`` (:mod:`rimcl.imaging.engine`: rays stay on the device
-until per-tracer rows come back), with the reference of each engine made once and reused
-for every case, as ``rimcl study`` does:
+until per-tracer rows come back), each engine making a reference once per configuration
+and reusing it for every case of that configuration, as ``rimcl study`` does (the default
+lens is focused in each case's mean index, so its cases need references of their own):
 
 - ``default study``: the built-in scene of ``rimcl study`` (shipped 64³ sample, 400
   tracers, the lens camera: 256 rays per tracer over its pupil, 2048² px sensor, its
