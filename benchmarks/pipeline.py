@@ -2,13 +2,17 @@
 
 Two scenes, each through ``engine = "numpy"`` (trace on the device, images tracer by
 tracer in NumPy) and ``engine = "device"`` (:mod:`rimcl.imaging.engine`: rays stay on the device
-until per-tracer rows come back), with the reference of each engine made once and reused
-for every case, as ``rimcl study`` does:
+until per-tracer rows come back), each engine making a reference once per configuration
+and reusing it for every case of that configuration, as ``rimcl study`` does (the default
+lens is focused in each case's mean index, so its cases need references of their own):
 
 - ``default study``: the built-in scene of ``rimcl study`` (shipped 64³ sample, 400
-  tracers, 24 x 24 rays each, 2048 px, σ 7 px, cases C0-C4, 5 frames);
-- ``paper density``: the same scene with the paper's 100 x 100 = 1e4 rays per tracer
-  (fewer tracers: ``--paper-tracers``).
+  tracers, the lens camera: 256 rays per tracer over its pupil, 2048² px sensor, its
+  diffraction-limited point spread, a 10 mm window; Mie weights and sensor noise; cases
+  C0-C4, 5 frames);
+- ``paper density``: the same scene through the paper's plane camera with its 100 x 100
+  = 1e4 rays per tracer (``camera.kind = "plane"``, ``camera.fan = 100``; 2048 px, σ 7 px;
+  fewer tracers: ``--paper-tracers``).
 
 Printed per scene and engine: wall time, stage times (``trace``: the trace kernel, or for
 the device engine the fan kernel that also back-projects; ``render`` and ``centroid``: the
@@ -47,19 +51,23 @@ ENGINES = ("numpy", "device")
 TIMINGS = ("track", "trace", "render", "centroid", "engine_host", "ray_sample")
 
 
-def configs(scene, cases, engine, device, tracers=None, fan=None):
+#: The paper-density scene: the default scene through the paper's plane camera and its
+#: 100 x 100 fan (the default lens camera has its own ray count, which ``fan`` does not set).
+PAPER_DENSITY = {"camera.kind": "plane", "camera.fan": 100}
+
+
+def configs(scene, cases, engine, device, tracers=None):
     """The measurement configuration of each case of ``scene`` for ``engine``."""
     out = {}
     for case in cases:
         config = MeasureConfig.from_scene(scene, case)
         run = dataclasses.replace(config.run, engine=engine, device=device)
-        camera = config.camera if fan is None else dataclasses.replace(config.camera, fan=fan)
         count = (
             config.tracers
             if tracers is None
             else dataclasses.replace(config.tracers, count=tracers)
         )
-        out[case] = dataclasses.replace(config, run=run, camera=camera, tracers=count)
+        out[case] = dataclasses.replace(config, run=run, tracers=count)
     return out
 
 
@@ -87,6 +95,8 @@ def run_scene(per_engine):
             if made:
                 references[engine].append(result.reference)
             frames, count = result.attrs["n_frames"], result.attrs["n_tracers"]
+            row.update(tracers=count, rays_per_tracer=result.attrs["rays_per_tracer"])
+            row["camera"] = per_case[case].camera.kind
             row["rays"] += passes * frames * count * result.attrs["rays_per_tracer"]
             row["images"] += passes * frames * count
             for name in TIMINGS:
@@ -96,11 +106,11 @@ def run_scene(per_engine):
     return rows
 
 
-def warm_up(scene, device, sizes):
+def warm_up(scene, device, tracers):
     """Build every kernel both engines use, for every batch size of the runs (PoCL compiles
     a kernel once per work size; builds are cached and are not part of the runs)."""
     for engine in ("device", "numpy"):
-        for config in configs(scene, ["C1"], engine, device, **sizes).values():
+        for config in configs(scene, ["C1"], engine, device, tracers).values():
             one_frame = dataclasses.replace(config, time=dataclasses.replace(config.time, frames=1))
             run_render(None, case="C1", config=one_frame)
 
@@ -108,7 +118,7 @@ def warm_up(scene, device, sizes):
 def scale_run(scene, device, tracers):
     """One case at paper density (``tracers`` x 1e4 rays x 3 frames, its reference
     included) through the device engine, end to end; prints and returns its times."""
-    config = configs(scene, ["C1"], "device", device, tracers=tracers, fan=100)["C1"]
+    config = configs(scene, ["C1"], "device", device, tracers=tracers)["C1"]
     config = dataclasses.replace(config, time=dataclasses.replace(config.time, frames=3))
     start = time.perf_counter()
     result = run_render(None, case="C1", config=config)
@@ -149,26 +159,25 @@ def main():
     args = parser.parse_args()
 
     device = select_device(args.device)
-    scene = load_scene(None)
     cases = [c.strip() for c in args.cases.split(",") if c.strip()]
     scenes = {
-        "default study": {"tracers": args.tracers, "fan": None},
-        "paper density": {"tracers": args.paper_tracers, "fan": 100},
+        "default study": (load_scene(None), args.tracers),
+        "paper density": (load_scene(None, PAPER_DENSITY), args.paper_tracers),
     }
-    for sizes in scenes.values():
-        warm_up(scene, device, sizes)
+    for scene, tracers in scenes.values():
+        warm_up(scene, device, tracers)
     report = {"device": describe_device(device), "cases": cases, "scenes": {}}
     print(f"device: {report['device']['device']} ({report['device']['platform']})")
-    for name, sizes in scenes.items():
+    for name, (scene, tracers) in scenes.items():
         rows = run_scene(
-            {engine: configs(scene, cases, engine, device, **sizes) for engine in ENGINES}
+            {engine: configs(scene, cases, engine, device, tracers) for engine in ENGINES}
         )
         ratio = rows["numpy"]["wall_s"] / rows["device"]["wall_s"]
         report["scenes"][name] = {**rows, "ratio_numpy_over_device": ratio}
-        first = configs(scene, cases[:1], "device", device, **sizes)[cases[0]]
+        row = rows["device"]
         print(
-            f"\n{name}: {first.tracers.count} tracers x {first.camera.fan**2} rays, "
-            f"cases {','.join(cases)}, reference once"
+            f"\n{name}: {row['tracers']} tracers x {row['rays_per_tracer']} rays "
+            f"({row['camera']} camera), cases {','.join(cases)}, a reference per configuration"
         )
         print(
             f"{'engine':7s} {'wall s':>8s} {'trace':>7s} {'render':>7s} {'centroid':>8s} "
@@ -185,9 +194,9 @@ def main():
             )
         print(f"device engine / numpy engine: {ratio:.2f}x faster")
     if args.scale_run:
-        report["scale_run"] = scale_run(scene, device, args.scale_run)
+        report["scale_run"] = scale_run(scenes["paper density"][0], device, args.scale_run)
     if args.profile:
-        per_case = configs(scene, ["C1"], "device", device, tracers=args.tracers)
+        per_case = configs(scenes["default study"][0], ["C1"], "device", device, args.tracers)
         report["profile"] = profile_device(per_case)
         print("\ncProfile of the device engine (one case, reference included):")
         print(report["profile"])

@@ -155,6 +155,11 @@ RIMCL_INLINE void window_direction(__constant const double *camera, const double
     const double guess = reach / camera[CAM_WINDOW_TOTAL];
     const double cap = camera[CAM_WINDOW_CAP];
     double sine = (guess < cap) ? guess : cap;
+    /* Each step is a fixed function of the sine, so once the iterates repeat (a fixed
+     * point, or two values in turn as rounding settles) the host's last iterate is known:
+     * stop there, with its bits, instead of running all LENS_NEWTON_STEPS steps (most rays
+     * settle within a few; NaN never repeats and runs them all). */
+    double before = NAN;
     for (int step = 0; step < LENS_NEWTON_STEPS; ++step) {
         double run = 0.0, slope = 0.0;
         for (int m = 0; m < 3; ++m) {
@@ -165,7 +170,17 @@ RIMCL_INLINE void window_direction(__constant const double *camera, const double
             run = (m == 0) ? term : run + term;
             slope = (m == 0) ? rate : slope + rate;
         }
-        sine = sine - (run - reach) / slope;
+        const double next = sine - (run - reach) / slope;
+        if (next == sine)
+            break;
+        if (next == before) {
+            /* iterate step + 1 is `next`; they alternate from here: the host's last one,
+             * LENS_NEWTON_STEPS, is `next` where it is an even number of steps on */
+            sine = ((LENS_NEWTON_STEPS - step - 1) % 2 == 0) ? next : sine;
+            break;
+        }
+        before = sine;
+        sine = next;
     }
     const double unit2 = (reach > 0.0) ? lateral2 / reach : 0.0;
     const double unit3 = (reach > 0.0) ? lateral3 / reach : 0.0;
@@ -268,6 +283,9 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
 #if RIMCL_STRAIGHT
     double lane_start[RIMCL_LANES][3], lane_dir[RIMCL_LANES][3];
 #endif
+#if RIMCL_MIE
+    double lane_aim_dir[RIMCL_LANES][3];
+#endif
 #pragma unroll
     for (int k = 0; k < RIMCL_LANES; ++k) {
         const int slot = (first + k < n_rays) ? first + k : n_rays - 1;
@@ -284,8 +302,8 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
         camera_direction(camera, from, aim, d);
 #if RIMCL_MIE
         /* the host weighs the camera's directions, before trace_rays normalises again */
-        if (first + k < n_rays)
-            ray_weight[ray] = mie_weight(mie, mie_terms, d);
+        for (int q = 0; q < 3; ++q)
+            lane_aim_dir[k][q] = d[q];
 #endif
         normalise3(d);
 #if RIMCL_STRAIGHT
@@ -320,6 +338,15 @@ __kernel void trace_fan(FIELD_GRID_TYPE grid, const int4 counts, __constant cons
 #endif
     }
 
+#if RIMCL_MIE
+    {
+        double weight[RIMCL_LANES];
+        mie_weight_lanes(mie, mie_terms, lane_aim_dir, weight);
+        for (int k = 0; k < RIMCL_LANES; ++k)
+            if (first + k < n_rays)
+                ray_weight[lane_ray[k]] = weight[k];
+    }
+#endif
 #if RIMCL_STRAIGHT
     (void)valid;
     (void)max_steps;

@@ -36,7 +36,8 @@ def _format(key, value):
     "--tune",
     is_flag=True,
     help="Measure the device's kernel shapes again (rays per work-item, PoCL switch, "
-    "work-group size), keep the fastest in the user's cache and print the measurements.",
+    "work-group size of the trace kernels; the image kernel's work-group size), keep the "
+    "fastest in the user's cache and print the measurements.",
 )
 @click.option(
     "--quick", is_flag=True, help="Short sweep: 3 steps, 1 adaptive tolerance, small ray set."
@@ -133,6 +134,7 @@ def bench(out_dir, tune, quick, field_path, cases, interps, precisions, pixels, 
 def _tune(device_spec):
     """Measure the kernel shapes of the device and print what was measured."""
     from rimcl.core.device import select_device
+    from rimcl.imaging.device import tune_image
     from rimcl.optics.shapes import cache_path, describe_shape
     from rimcl.optics.tuning import tune
 
@@ -148,3 +150,14 @@ def _tune(device_spec):
     for row in sorted(entry["measurements"], key=lambda m: -m["ray_steps_per_s"]):
         click.echo(f"{describe_shape(row):40s} {row['ray_steps_per_s']:12.3g}")
     click.echo(f"chosen: {describe_shape(entry['shape'])}; stored in {cache_path()}")
+    click.echo("measuring the image kernel's work-group sizes ...")
+    image = tune_image(device)
+    work = image["workload"]
+    click.echo(
+        f"{work['tracers']} tracers x {work['rays']} rays, best of {work['repeats']} "
+        f"kernel runs each ({image['seconds']:.0f} s in all, builds included)"
+    )
+    click.echo(f"{'image work-group size':40s} {'tracers/s':>12s}")
+    for row in sorted(image["measurements"], key=lambda m: -m["tracers_per_s"]):
+        click.echo(f"{row['group']:<40d} {row['tracers_per_s']:12.3g}")
+    click.echo(f"chosen: image group {image['group']}; stored in {cache_path()}")

@@ -62,9 +62,9 @@ def devices(as_json):
         "PoCL first, newest PoCL and LLVM first)"
     )
     click.echo(
-        "kernel shape: rays per work-item, PoCL switch, work-group size of the trace kernels; "
-        "measured once per device on first use (rimcl bench --tune measures again), "
-        "'rule' until then"
+        "kernel shape: rays per work-item, PoCL switch, work-group size of the trace kernels "
+        "(and of the image kernel where measured); measured once per device on first use "
+        "(rimcl bench --tune measures again), 'rule' until then"
     )
 
 

@@ -180,3 +180,37 @@ def test_lens_rays_are_aimed_through_the_field_in_both_engines(device, scene_and
     assert np.array_equal(made["device"].collected, made["numpy"].collected)
     differ = made["numpy"].images.astype(int) - made["device"].images.astype(int)
     assert made["numpy"].images.max() > 100 and np.abs(differ).max() <= 1
+
+
+def test_uniform_medium_rays_run_straight_in_both_engines(device, scene_and_tracers):
+    # the uniform-medium pair: both engines run the rays straight in closed form (no
+    # steps), so every collected ray images back onto its own tracer and the frames agree
+    scene, imaging, tracers, field = scene_and_tracers
+    uniform = Field.from_arrays(
+        np.zeros((2, 2, 2), dtype=np.float32),
+        spacing=field.box_hi - field.box_lo,
+        origin=field.box_lo,
+        n_ref=1.33,
+        gradient=np.zeros((2, 2, 2, 3), dtype=np.float32),
+    )
+    assert uniform.is_uniform
+    camera = PupilCamera(scene, diameter=0.3, distance=3.0, rays=12)
+    renderer = imaging.renderer(scene, camera)
+    shape = imaging.frame_shape(scene, camera)
+    intensity = sheet_intensity(tracers[:, 0], scene.x_sheet, imaging.thickness(scene))
+    options = {**TRACE, "device": device}
+    light, optics, collected, totals = _expose(
+        uniform, tracers, intensity, camera, scene, renderer, shape, options, 10**9, None
+    )
+    frames = DeviceFrames(camera, scene, renderer, shape, device)
+    got, got_optics, got_collected, got_totals = frames.expose(uniform, tracers, intensity, TRACE)
+    seen = collected > 0
+    assert seen.sum() > len(tracers) // 2
+    np.testing.assert_allclose(optics[seen], tracers[seen, 1:], rtol=0, atol=1e-12)
+    # the same footprints and products in the same order; ndtr differs by a few ulp of 1
+    # (absolute, in the tails too) and a tracer's 12 rays now all land on one point, so
+    # those differences add up over its 12 rays (each weighing at most 1) in each pixel
+    assert np.abs(got - light).max() <= 4 * camera.rays_per_tracer * np.spacing(1.0)
+    assert np.array_equal(got_collected, collected)
+    np.testing.assert_allclose(got_optics, optics, rtol=0, atol=1e-14)
+    assert np.array_equal(got_totals["status"], totals["status"])

@@ -121,3 +121,72 @@ def test_devices_shows_the_shape_in_use_and_bench_needs_out_or_tune(device, cach
         .splitlines()[-1]
         .endswith("give --out DIR for the sweep, or --tune to measure kernel shapes")
     )
+
+
+def test_image_kernel_work_group_sizes_give_the_same_rows(device):
+    """The image kernel's work-group size changes speed only: each tracer's row is made by
+    one work-item whatever the group, so the columns (and the summed frame) are the same."""
+    from rimcl.imaging.device import (
+        CPU_IMAGE_GROUPS,
+        GPU_IMAGE_GROUPS,
+        image_points,
+        rule_image_group,
+    )
+    from rimcl.imaging.frames import Imaging
+    from rimcl.imaging.render import FrameImage, Renderer
+
+    rng = np.random.default_rng(21)
+    pixel = 1 / 256
+    count, rays = 40, 24
+    points = rng.uniform(0.1, 0.9, size=(count, 1, 2)) + 1.5 * pixel * rng.normal(
+        size=(count, rays, 2)
+    )
+    usable = rng.uniform(size=(count, rays)) > 0.1
+    weights = rng.uniform(0.5, 1.5, size=(count, rays))
+    imaging = Imaging(Renderer("exact", pixel, (0.0, 0.0), 1.2, 32, 12), 300.0)
+    flags = np.zeros(count, dtype=np.int64)
+    # the sizes tune_image() chooses from (each is another build of the kernel on PoCL)
+    candidates = CPU_IMAGE_GROUPS if rule_image_group(device) == 1 else GPU_IMAGE_GROUPS
+    groups = [g for g in candidates if g <= device.max_work_group_size]
+    columns, frames = {}, {}
+    for group in groups:
+        canvas = FrameImage(256, 256, imaging.renderer.full_scale)
+        columns[group] = image_points(
+            imaging, points, usable, weights, flags, device=device, canvas=canvas, group=group
+        )
+        frames[group] = canvas.counts
+    first = groups[0]
+    assert np.count_nonzero(np.isfinite(columns[first]["x2"])) > count // 2
+    assert frames[first].max() > 0
+    for group in groups[1:]:
+        for name, values in columns[first].items():
+            np.testing.assert_array_equal(columns[group][name], values, err_msg=f"{group} {name}")
+        np.testing.assert_array_equal(frames[group], frames[first])
+    with pytest.raises(RimclError, match="work-group size must be 1 to"):
+        image_points(imaging, points, usable, weights, flags, device=device, group=1 << 20)
+
+
+def test_a_tiny_image_tuning_run_keeps_the_fastest_group(device, cache):
+    """tune_image() times the image kernel's work-group sizes and keeps the fastest in the
+    device's cache entry, beside the trace shape, where image_group() and `rimcl devices`
+    find it; before the device has an entry nothing is stored and the rule applies."""
+    from rimcl.imaging.device import image_group, rule_image_group, tune_image
+
+    groups = [1, 2] if rule_image_group(device) == 1 else [32, 64]
+    alone = tune_image(device, rays=8, repeats=1, groups=groups)
+    assert not alone["stored"] and not cache.exists()
+    assert image_group(device) == rule_image_group(device)
+    shapes._write_cache(cache, shapes.device_key(device), {"shape": KernelShape().describe()})
+    shapes._memo.clear()
+    result = tune_image(device, rays=8, repeats=2, groups=groups)
+    assert result["stored"]
+    measured = {m["group"]: m for m in result["measurements"]}
+    assert set(measured) == set(groups)
+    fastest = max(measured, key=lambda group: measured[group]["tracers_per_s"])
+    assert result["group"] == fastest
+    assert all(len(m["kernel_seconds"]) == 2 for m in measured.values())
+    stored = json.loads(cache.read_text())["entries"][shapes.device_key(device)]
+    assert stored["image"]["group"] == fastest and stored["shape"] == KernelShape().describe()
+    assert image_group(device) == fastest
+    assert shapes.shape_in_use(device)["image_group"] == fastest
+    assert f"image group {fastest}" in shapes.describe_shape(shapes.shape_in_use(device))

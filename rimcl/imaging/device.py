@@ -15,9 +15,19 @@ digitised images agree the centroids agree to the last bit.
 One work-item images one tracer at a time, sequentially, in its own scratch slot, and
 takes the next tracer from a shared counter: on a CPU a few slots per core, on a GPU
 thousands (batches are enlarged to fill them). No floating-point value is added atomically.
+
+So the work-group size changes speed only: every tracer's row is made by one work-item, in
+the same order, whatever the group (tested bit for bit). Which size is fastest depends on
+the device; :func:`tune_image` times the sizes that matter on a small batch of synthetic
+tracers and keeps the fastest in the device's entry of the kernel-shape cache
+(:mod:`rimcl.optics.shapes`, beside the trace kernels' shape); :func:`image_group` uses it,
+measuring it on first use of the device engine (``RIMCL_TUNE=auto``).
 """
 
+import datetime
+import logging
 import math
+import time
 
 import numpy as np
 
@@ -27,6 +37,8 @@ from rimcl.imaging.frames import VARIANT_COLUMNS, empty_columns
 from rimcl.imaging.render import TRUNCATE_SIGMAS
 from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS
 from rimcl.optics.trace import STATUS_NAMES
+
+logger = logging.getLogger(__name__)
 
 #: Ray code bit of ``cl/fan.cl``: the ray was collected by the camera.
 RAY_COLLECTED = 8
@@ -48,8 +60,13 @@ PERIMETER_SCORES = (5, 7, 13, 15, 17, 21, 23, 25, 27, 33)
 CPU_SLOTS_PER_CORE = 4
 #: Tracer images in flight per GPU multiprocessor (one work-item each).
 GPU_SLOTS_PER_UNIT = 256
-#: Work-group size of the image kernel on GPUs.
+#: Work-group size of the image kernel on GPUs unless one was measured.
 GPU_GROUP = 64
+#: Work-group sizes of the image kernel timed by :func:`tune_image` on CPUs (PoCL runs a
+#: work-group's items one after the other on one core: 1 spreads the slots over the cores)
+#: and on GPUs.
+CPU_IMAGE_GROUPS = (1, 2, 4)
+GPU_IMAGE_GROUPS = (32, 64, 128, 256)
 #: Sources (rays, or the paper renderer's pixels) the image kernel adds to a window in one
 #: pass (each pixel loaded and stored once per block; the same sums in the same order).
 SPLAT_BLOCK = 16
@@ -93,6 +110,11 @@ def require_fp64(device):
         )
 
 
+def event_seconds(event):
+    """Seconds an OpenCL event ran on the device (a profiling queue's)."""
+    return (event.profile.end - event.profile.start) * 1e-9
+
+
 def profiling_queue(device):
     """An in-order queue with profiling on ``device`` (kernel times from events)."""
     import pyopencl as cl
@@ -119,9 +141,12 @@ class DeviceImager:
     device : pyopencl.Device
     queue : pyopencl.CommandQueue
         An in-order queue with profiling.
+    group : int, optional
+        Work-items per work-group (results do not depend on it); default
+        :func:`image_group`.
     """
 
-    def __init__(self, imaging, rays_per_tracer, max_tracers, device, queue):
+    def __init__(self, imaging, rays_per_tracer, max_tracers, device, queue, group=None):
         import pyopencl as cl
 
         from rimcl.core.device import context_for, is_pocl
@@ -143,8 +168,12 @@ class DeviceImager:
         # a footprint's edges, plus room for the union of a block of nearby footprints
         self.table_width = (min(2 * self.radius + 2 + SPLAT_SLACK, window + 1) + 15) // 8 * 8
         cpu = bool(device.type & cl.device_type.CPU)
-        # CPUs: a work-group per slot, so that slots spread over the cores; GPUs: many slots
-        self.group = 1 if cpu else GPU_GROUP
+        self.group = image_group(device) if group is None else int(group)
+        if not 0 < self.group <= device.max_work_group_size:
+            raise RimclError(
+                f"the image kernel's work-group size must be 1 to "
+                f"{device.max_work_group_size} on {device.name.strip()}, got {self.group}"
+            )
         context = context_for(device)
         sensor = imaging.sensor
         defines = {
@@ -177,8 +206,7 @@ class DeviceImager:
         budget = SCRATCH_SHARE * device.global_mem_size
         wanted = (CPU_SLOTS_PER_CORE if cpu else GPU_SLOTS_PER_UNIT) * device.max_compute_units
         self.slots = max(1, min(int(wanted), int(budget // slot_bytes)))
-        if not cpu:
-            self.slots = max(self.group, self.slots // self.group * self.group)
+        self.slots = max(self.group, self.slots // self.group * self.group)  # whole groups
         fill = min(
             max(self.slots, MIN_BATCH_RAYS // self.rays), max(1, MAX_BATCH_RAYS // self.rays)
         )
@@ -473,16 +501,18 @@ class PointImager:
     max_tracers : int
         Tracers per launch at least (:class:`DeviceImager` may raise it); more are imaged
         in several launches.
+    group : int, optional
+        The image kernel's work-group size (default :func:`image_group`).
     """
 
-    def __init__(self, imaging, rays_per_tracer, device, max_tracers=1):
+    def __init__(self, imaging, rays_per_tracer, device, max_tracers=1, group=None):
         import pyopencl as cl
 
         from rimcl.core.device import context_for
 
         self.imaging = imaging
         self.queue = profiling_queue(device)
-        self.imager = DeviceImager(imaging, rays_per_tracer, max_tracers, device, self.queue)
+        self.imager = DeviceImager(imaging, rays_per_tracer, max_tracers, device, self.queue, group)
         size = self.imager.max_tracers * self.imager.rays
         context = context_for(device)
         ro = cl.mem_flags.READ_ONLY
@@ -554,8 +584,148 @@ class PointImager:
         return out
 
 
+def rule_image_group(device):
+    """The image kernel's work-group size without measurements: 1 on CPUs (a work-group
+    per slot, so that slots spread over the cores), :data:`GPU_GROUP` on GPUs."""
+    import pyopencl as cl
+
+    return 1 if device.type & cl.device_type.CPU else GPU_GROUP
+
+
+def image_group(device):
+    """The image kernel's work-group size on ``device``: the measured one of its
+    kernel-shape cache entry (measured by :func:`tune_image` on first use in
+    ``RIMCL_TUNE=auto``, with the trace kernels' shape), else :func:`rule_image_group`."""
+    from rimcl.optics.shapes import shape_in_use, tune_mode
+    from rimcl.optics.tuning import tuned_entry
+
+    mode = tune_mode()
+    if mode == "off" or tuned_entry(device) is None:
+        return rule_image_group(device)
+    group = shape_in_use(device)["image_group"]
+    if group is not None and group <= device.max_work_group_size:
+        return int(group)
+    return tune_image(device)["group"] if mode == "auto" else rule_image_group(device)
+
+
+def _tuning_batch(rng, tracers, rays, pixel_size):
+    """Image points ``(tracers, rays, 2)`` of :func:`tune_image`: clouds of 0.5 to 3 px
+    around tracers spread over a unit field of view."""
+    centres = rng.uniform(0.1, 0.9, size=(tracers, 1, 2))
+    widths = rng.uniform(0.5, 3.0, size=(tracers, 1, 1)) * pixel_size
+    return centres + widths * rng.normal(size=(tracers, rays, 2))
+
+
+def tune_image(device, *, path=None, rays=256, repeats=3, groups=None, write=True):
+    """Time the image kernel's work-group sizes on ``device``; keep the fastest.
+
+    A batch of synthetic tracers (clouds of image points, the exact renderer, σ 2 px,
+    12 bits, at least 1024 tracers and one per slot) is imaged once per size, in
+    interleaved rounds; a size's time is the best of ``repeats`` kernel runs. A size
+    whose rows differ in any bit from the first size's is left out (a driver bug; logged).
+
+    Parameters
+    ----------
+    device : pyopencl.Device
+    path : Path, optional
+        Cache file; default :func:`rimcl.optics.shapes.cache_path`.
+    rays : int
+        Rays per tracer.
+    repeats : int
+    groups : sequence of int, optional
+        Default :data:`CPU_IMAGE_GROUPS` or :data:`GPU_IMAGE_GROUPS` (those the device allows).
+    write : bool
+        Store the result under ``image`` in the device's cache entry (where it has one:
+        :func:`rimcl.optics.tuning.tune` makes it).
+
+    Returns
+    -------
+    dict
+        ``group``, ``measurements`` (per size: ``tracers_per_s``, ``kernel_seconds`` of
+        each run), ``workload``, ``measured`` (UTC time), ``seconds`` and ``stored``.
+    """
+    import pyopencl as cl
+
+    from rimcl.core.device import context_for
+    from rimcl.imaging.frames import Imaging
+    from rimcl.imaging.render import Renderer
+    from rimcl.optics.shapes import add_to_entry
+
+    started = time.perf_counter()
+    cpu = bool(device.type & cl.device_type.CPU)
+    if groups is None:
+        groups = CPU_IMAGE_GROUPS if cpu else GPU_IMAGE_GROUPS
+    groups = [int(g) for g in groups if 0 < int(g) <= device.max_work_group_size] or [
+        min(rule_image_group(device), int(device.max_work_group_size))
+    ]
+    pixel_size = 1 / 512
+    imaging = Imaging(Renderer("exact", pixel_size, (0.0, 0.0), 2.0, 64, 12), 200.0)
+    queue = profiling_queue(device)
+    imagers = {g: DeviceImager(imaging, rays, 256, device, queue, g) for g in groups}
+    # every slot busy (a GPU has thousands), within every imager's rows
+    tracers = max(1024, *(i.slots for i in imagers.values()))
+    tracers = min(tracers, *(i.max_tracers for i in imagers.values()))
+    points = _tuning_batch(np.random.default_rng(0), tracers, rays, pixel_size)
+    pixels = np.ascontiguousarray(imaging.renderer.to_pixels(points.reshape(-1, 2)))
+    context = context_for(device)
+    ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+    buffers = (
+        cl.Buffer(context, ro, hostbuf=pixels),
+        cl.Buffer(context, ro, hostbuf=np.zeros(len(pixels), dtype=np.int32)),
+        cl.Buffer(context, ro, hostbuf=np.full(len(pixels), RAY_COLLECTED, dtype=np.uint8)),
+    )
+
+    def run(imager):
+        event = imager.enqueue(buffers, tracers, imager.set_weights(1.0, tracers))
+        rows = imager.empty_rows(tracers)
+        cl.wait_for_events(imager.enqueue_read(*rows))
+        return event_seconds(event), rows
+
+    first = None
+    seconds = {}
+    for group, imager in imagers.items():  # build and warm up; check the bits
+        rows = run(imager)[1]
+        first = rows if first is None else first
+        if all(np.array_equal(a, b, equal_nan=True) for a, b in zip(rows, first, strict=True)):
+            seconds[group] = []
+        else:
+            logger.warning(
+                "image work-group size %d gives other rows on %s: left out", group, device.name
+            )
+    for _ in range(repeats):
+        for group in seconds:
+            seconds[group].append(run(imagers[group])[0])
+    best = min(seconds, key=lambda group: min(seconds[group]))
+    result = {
+        "group": int(best),
+        "measurements": [
+            {"group": g, "tracers_per_s": tracers / min(runs), "kernel_seconds": runs}
+            for g, runs in seconds.items()
+        ],
+        "workload": {
+            "tracers": int(tracers),
+            "rays": int(rays),
+            "renderer": imaging.renderer.describe(),
+            "repeats": int(repeats),
+        },
+        "measured": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "seconds": time.perf_counter() - started,
+    }
+    result["stored"] = bool(write and add_to_entry(device, "image", result, path))
+    return result
+
+
 def image_points(
-    imaging, points, usable, weights, flags, scales=None, device=None, canvas=None, noise=None
+    imaging,
+    points,
+    usable,
+    weights,
+    flags,
+    scales=None,
+    device=None,
+    canvas=None,
+    noise=None,
+    group=None,
 ):
     """Render, digitise and locate each tracer of a batch on the device.
 
@@ -576,6 +746,8 @@ def image_points(
     noise : (int, int, ndarray), optional
         ``(pass_id, frame, tracer_ids)`` as :func:`rimcl.imaging.frames.image_batch`; the kernel
         numbers tracers from the first id, so ``tracer_ids`` must be consecutive.
+    group : int, optional
+        The image kernel's work-group size (:class:`DeviceImager`; for tests and tuning).
 
     Returns
     -------
@@ -584,5 +756,5 @@ def image_points(
     from rimcl.core.device import select_device
 
     device = select_device(device, need_fp64=True)
-    imager = PointImager(imaging, usable.shape[1], device, max(len(usable), 1))
+    imager = PointImager(imaging, usable.shape[1], device, max(len(usable), 1), group)
     return imager.image(points, usable, weights, flags, scales, canvas, noise)

@@ -39,7 +39,7 @@ import time
 import numpy as np
 
 from rimcl.core.errors import RimclError
-from rimcl.imaging.device import DeviceImager, profiling_queue, require_fp64
+from rimcl.imaging.device import DeviceImager, event_seconds, profiling_queue, require_fp64
 from rimcl.optics.camera import LensCamera, PlaneCamera, PupilCamera
 from rimcl.optics.shapes import default_kernel_shape
 from rimcl.optics.straight import straight_rays
@@ -115,11 +115,6 @@ def tracer_directions(camera, positions, aim_from=None):
         return camera.directions(positions[:, 1:] if aim_from is None else aim_from)
     aim = camera.aim_points()[None, :, :] - positions[:, None, :]
     return aim / np.linalg.norm(aim, axis=-1, keepdims=True)
-
-
-def event_seconds(event):
-    """Seconds an OpenCL event ran on the device (a profiling queue's)."""
-    return (event.profile.end - event.profile.start) * 1e-9
 
 
 @dataclasses.dataclass

@@ -20,8 +20,8 @@ those ulps of a rounding boundary.
 import numpy as np
 
 from rimcl.core.errors import RimclError
-from rimcl.imaging.device import profiling_queue, require_fp64
-from rimcl.imaging.engine import FanStage, event_seconds
+from rimcl.imaging.device import event_seconds, profiling_queue, require_fp64
+from rimcl.imaging.engine import FanStage
 from rimcl.optics.trace import STATUS_NAMES
 
 #: Tile side of ``cl/frame.cl`` (pixels): one work-item per tile; 32 gives a 1024² frame

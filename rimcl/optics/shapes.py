@@ -212,6 +212,26 @@ def cached_entry(device):
     return entry
 
 
+def add_to_entry(device, name, part, path=None):
+    """Store ``part`` under ``name`` in ``device``'s cache entry, beside its trace shape
+    (the image kernel's measured work-group size: :func:`rimcl.imaging.device.tune_image`).
+
+    Returns
+    -------
+    bool
+        False (nothing written) where the device has no entry yet.
+    """
+    path = cache_path() if path is None else Path(path)
+    key = device_key(device)
+    entry = _read_cache(path).get(key)
+    if entry is None or not _valid_entry(entry):
+        return False
+    entry[name] = part
+    _write_cache(path, key, entry)
+    _memo[(path, key)] = entry
+    return True
+
+
 def shape_in_use(device):
     """The shape ``device`` traces with now, and where it comes from, without tuning.
 
@@ -220,7 +240,8 @@ def shape_in_use(device):
     dict
         :meth:`KernelShape.describe` of the default trace's shape, plus ``source``:
         ``measured`` (with ``measured``, the time, and ``ray_steps_per_s``), ``rule``
-        (``RIMCL_TUNE=off``, or not yet measured: it is on first use in mode ``auto``).
+        (``RIMCL_TUNE=off``, or not yet measured: it is on first use in mode ``auto``);
+        ``image_group``: the image kernel's measured work-group size, or None (its rule).
     """
     mode = tune_mode()
     entry = None
@@ -228,7 +249,12 @@ def shape_in_use(device):
         entry = _read_cache(cache_path()).get(device_key(device))
         entry = entry if entry is not None and _valid_entry(entry) else None
     if entry is None:
-        return {**rule_shape(device).describe(), "source": "rule", "mode": mode}
+        return {
+            **rule_shape(device).describe(),
+            "source": "rule",
+            "mode": mode,
+            "image_group": None,
+        }
     rates = [m.get("ray_steps_per_s") for m in entry.get("measurements", [])]
     rates = [rate for rate in rates if isinstance(rate, (int, float))]
     return {
@@ -237,16 +263,27 @@ def shape_in_use(device):
         "mode": mode,
         "measured": entry.get("measured"),
         "ray_steps_per_s": max(rates) if rates else None,
+        "image_group": _image_group(entry),
     }
 
 
 def describe_shape(shape):
-    """One line for tables: ``16 lanes, PoCL switch, group 64``."""
+    """One line for tables: ``16 lanes, PoCL switch, group 64`` (and ``image group 2``
+    where the image kernel's was measured)."""
     parts = [f"{shape['lanes']} lane{'s' if shape['lanes'] > 1 else ''}"]
     if shape["pocl_fast"]:
         parts.append("PoCL switch")
     parts.append(f"group {shape['group']}" if shape["group"] else "group auto")
+    if shape.get("image_group"):
+        parts.append(f"image group {shape['image_group']}")
     return ", ".join(parts)
+
+
+def _image_group(entry):
+    """The measured image-kernel work-group size of a cache entry, or None."""
+    image = entry.get("image")
+    group = image.get("group") if isinstance(image, dict) else None
+    return group if isinstance(group, int) and group > 0 else None
 
 
 def _valid_entry(entry):

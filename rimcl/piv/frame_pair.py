@@ -6,8 +6,10 @@ model of :mod:`rimcl.piv.render`).
 Two engines make the light of a frame: ``"device"`` (:class:`rimcl.imaging.frame_device.
 DeviceFrames`: rays made, traced, imaged and splatted on the OpenCL device, one work-item
 per tile of the frame, in a fixed order) and ``"numpy"`` (the reference: rays traced by
-:func:`rimcl.trace_rays` and deposited by :func:`deposit_rays`). Both digitise with the same
-:class:`rimcl.imaging.sensor.Sensor` on the host.
+:func:`rimcl.trace_rays` and deposited by :func:`deposit_rays`). Through a uniform field
+(the uniform-medium pair) both engines run the rays straight in closed form
+(:func:`rimcl.optics.straight.straight_rays`; ``cl/fan.cl`` with ``RIMCL_STRAIGHT``). Both
+digitise with the same :class:`rimcl.imaging.sensor.Sensor` on the host.
 """
 
 import dataclasses
@@ -21,6 +23,7 @@ from rimcl.imaging.engine import tracer_directions
 from rimcl.imaging.sensor import MEASURED_PASS, NoiseKey, Sensor
 from rimcl.optics.aiming import aim_origins
 from rimcl.optics.camera import LensCamera
+from rimcl.optics.straight import straight_path_limit, straight_rays
 from rimcl.optics.trace import STATUS_NAMES
 from rimcl.optics.tracing import trace_rays
 from rimcl.piv.imaging_config import sheet_intensity
@@ -140,13 +143,23 @@ def _expose(
         ids = np.arange(first, min(first + batch, len(positions)))
         start = time.perf_counter()
         directions = tracer_directions(camera, positions[ids], aim_from[ids])
-        result = trace_rays(
-            field,
-            np.repeat(positions[ids], rays, axis=0),
-            directions.reshape(-1, 3),
-            x_end=scene.x_end,
-            **options,
-        )
+        origins = np.repeat(positions[ids], rays, axis=0)
+        if field.is_uniform:  # the uniform medium: straight lines, no steps (as cl/fan.cl)
+            limit = straight_path_limit(
+                field,
+                options.get("step"),
+                scene.x_end,
+                origins,
+                directions.reshape(-1, 3),
+                options.get("precision", "f32c"),
+            )
+            result = straight_rays(
+                field, origins, directions.reshape(-1, 3), x_end=scene.x_end, max_length=limit
+            )
+        else:
+            result = trace_rays(
+                field, origins, directions.reshape(-1, 3), x_end=scene.x_end, **options
+            )
         middle = time.perf_counter()
         ok = result.status == 0
         # Snell at a wall takes each ray's own index where it leaves the field (as the fan kernel)
