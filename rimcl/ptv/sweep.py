@@ -12,7 +12,8 @@ import dataclasses
 
 import numpy as np
 
-from rimcl.ptv.kinematics import kinematics_tables
+from rimcl.imaging.frames import THRESHOLD_VARIANTS
+from rimcl.ptv.kinematics import add_variant_columns, kinematics_tables
 from rimcl.scene.config import TimeConfig
 
 #: Position kinds of a render file's ``tracers`` table (columns ``x2_<kind>``, ``x3_<kind>``).
@@ -64,6 +65,26 @@ def every_mth_frame(tables, multiple, time_config):
         dt,
         time_config,
     )
+    for suffix, _ in THRESHOLD_VARIANTS:
+        # the tracers located at the other thresholds: their kinematics at this Δt too, as
+        # the measurement makes them (rimcl.ptv.measure)
+        if f"flags_{suffix}" not in columns:
+            continue
+        variant = {"true": positions["true"]}
+        for kind in ("ref", "meas"):
+            variant[kind] = np.stack(
+                [columns[f"x2_{kind}_{suffix}"], columns[f"x3_{kind}_{suffix}"]], axis=-1
+            )
+        variant_tables = kinematics_tables(
+            columns["id"][0],
+            variant,
+            truth,
+            columns[f"flags_{suffix}"],
+            columns["notes"],
+            dt,
+            time_config,
+        )
+        add_variant_columns(kinematics, variant_tables, suffix)
     return dataclasses.replace(
         tables,
         dt=dt,
