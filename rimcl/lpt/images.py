@@ -8,7 +8,8 @@ rays per tracer so that a tracer's light does not depend on the count. The rays 
 rendered in a window per tracer (pixel-integrated Gaussians of the camera's diffraction
 σ, :class:`rimcl.imaging.render.Renderer` ``exact``), digitised by the sensor
 (:class:`rimcl.imaging.sensor.Sensor`, shot and read noise when ``sensor.noise``) and
-located by the thresholded grey-weighted centroid (:func:`rimcl.imaging.centroid.locate`),
+located by the thresholded grey-weighted centroid (:func:`rimcl.imaging.centroid.locate`,
+and again at the threshold ×½ and ×2 in the same digitised image: the sensitivity band),
 by either engine of PTV (``run.engine``): the NumPy engine,
 :func:`rimcl.imaging.frames.image_batch`, or the device's image kernel
 (:class:`rimcl.imaging.device.PointImager`, ``cl/image.cl``) on the same image points, whose
@@ -37,7 +38,7 @@ import dataclasses
 import numpy as np
 
 from rimcl.imaging.centroid import EXCLUDING, TracerFlag
-from rimcl.imaging.frames import Imaging, image_batch
+from rimcl.imaging.frames import THRESHOLD_VARIANTS, Imaging, image_batch
 from rimcl.imaging.mie import ray_weights
 from rimcl.imaging.render import FrameImage, Renderer, Window
 from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS, Sensor
@@ -171,12 +172,17 @@ class Located:
         :class:`rimcl.imaging.centroid.TracerFlag` bits.
     peak : ndarray, shape (N,)
         Brightest pixel before clipping (sensor units).
+    variants : dict of str to (ndarray, ndarray)
+        Per suffix of :data:`rimcl.imaging.frames.THRESHOLD_VARIANTS`: the centroid
+        (N, 2) px and flags (N,) of each tracer located again at that threshold in the
+        same digitised image.
     """
 
     centroid: np.ndarray
     optics: np.ndarray
     flags: np.ndarray
     peak: np.ndarray
+    variants: dict
 
 
 def device_imager(imaging, rays, tracers, device):
@@ -226,6 +232,13 @@ def locate_view(imaging, view, light, scale, key, canvas=None, imager=None):
         np.column_stack([out["x2_opt"], out["x3_opt"]]),
         out["flags"],
         out["peak"],
+        {
+            suffix: (
+                np.column_stack([out[f"x2_{suffix}"], out[f"x3_{suffix}"]]),
+                out[f"flags_{suffix}"],
+            )
+            for suffix, _ in THRESHOLD_VARIANTS
+        },
     )
 
 

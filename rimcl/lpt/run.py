@@ -17,7 +17,8 @@ For each case of the scene (same tracers, same tracks, common random numbers):
    (:mod:`.matching`);
 6. tracks are fitted (sliding polynomial, :func:`rimcl.ptv.track.sliding_fit`) and compared:
    refraction ``meas - ref`` (with and without the self-calibration) and baseline
-   ``ref - true``, per component.
+   ``ref - true``, per component; the headline numbers again with every image located at
+   each camera's threshold ×½ and ×2 (:mod:`.sensitivity`).
 
 Units: positions in field length units (``length_m`` metres each), image points in pixels,
 velocities in length/time units, accelerations in length/time² units; with the scene's time
@@ -32,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from rimcl.core.errors import RimclError
+from rimcl.imaging.frames import THRESHOLD_VARIANTS
 from rimcl.lpt.calibration import PinholeModel, SoloffModel, target_points, triangulate
 from rimcl.lpt.config import CameraSpec, preset_cameras
 from rimcl.lpt.config import describe as describe_scene
@@ -50,6 +52,7 @@ from rimcl.lpt.images import (
 from rimcl.lpt.matching import match_frame
 from rimcl.lpt.rig import RigCamera
 from rimcl.lpt.selfcal import self_calibrate
+from rimcl.lpt.sensitivity import band_lines, threshold_sensitivity
 from rimcl.lpt.units import COMPONENTS, case_units
 from rimcl.lpt.views import Tracer, choose_ray_count, uniform_field, view
 from rimcl.optics.camera import FlatWindow
@@ -275,7 +278,9 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
         Arrays (``centroid_meas``/``ref`` (F, C, N, 2) located, ``optics_meas``/``ref``
         (F, C, N, 2) the rays' mean image points, ``x_meas``/``x_ref`` and
         ``x_opt_meas``/``x_opt_ref`` (F, N, 3), ``disparity_*`` (F, N, C), ``image_flags_*``
-        (F, C, N), ``failed_rays`` (F, C, N), ``flags`` (N,)), the cameras, calibration,
+        (F, C, N), ``failed_rays`` (F, C, N), ``flags`` (N,); per variant threshold suffix
+        ``s`` of :data:`~rimcl.imaging.frames.THRESHOLD_VARIANTS` ``centroid_<kind>_s``,
+        ``image_flags_<kind>_s`` and ``x_<kind>_s``), the cameras, calibration,
         exposure, ray choices and stage ``timings`` (s).
     """
     from rimcl.ptv.field_source import case_of
@@ -319,6 +324,12 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     optics = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
     image_flags = {kind: np.zeros((frames, ncam, count), dtype=np.int64) for kind in kinds}
     peaks = {kind: np.full((frames, ncam, count), np.nan) for kind in kinds}
+    # the same images located at each variant threshold: (centroids, flags) per kind
+    variants = {
+        (kind, suffix): (np.full((frames, ncam, count, 2), np.nan), np.zeros_like(peaks[kind], int))
+        for kind in kinds
+        for suffix, _ in THRESHOLD_VARIANTS
+    }
     failed = np.zeros((frames, ncam, count), dtype=np.int32)
     timings["views"] = timings["images"] = 0.0
     for k, moment in enumerate(run.times):
@@ -348,6 +359,8 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
                 optics[kind][k, c] = found.optics
                 image_flags[kind][k, c] = found.flags
                 peaks[kind][k, c] = found.peak
+                for suffix, (points, bits) in found.variants.items():
+                    variants[kind, suffix][0][k, c], variants[kind, suffix][1][k, c] = points, bits
                 if frame_sink:
                     frame_sink(str(index.name), kind, camera, k, canvas.counts)
         if progress:
@@ -432,6 +445,9 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
             result[f"disparity_{label}"] = disparity[label]
     if calibrated is not None:
         result["x_vsc"], result["disparity_vsc"] = positions["vsc"], disparity["vsc"]
+    for (kind, suffix), (points, bits) in variants.items():
+        result[f"centroid_{kind}_{suffix}"], result[f"image_flags_{kind}_{suffix}"] = points, bits
+        result[f"x_{kind}_{suffix}"] = triangulate_frames(models, points)[0]
     return result
 
 
@@ -675,6 +691,8 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
             stats["timings_s"] = result["timings"]
             depth = float(run.volume.hi[0] - run.volume.lo[0])
             stats["units"] = case_units(stats, depth, run.length_m, run.time_s)
+            kept = (result["flags"] & ~FLAG_IMAGE_LOST) == 0  # each variant loses its own
+            stats["sensitivity"] = threshold_sensitivity(run, result, stats, kept, scene)
             started = time.perf_counter()
             write_case(out_dir / f"lpt_case_{result['case']}.h5", run, result, scene, overwrite)
             if dataset:
@@ -726,6 +744,7 @@ def summary_lines(document):
                 )
             )
         lines.append("  " + _physical_line(case.get("units")))
+        lines.extend(band_lines(case))
         for kind, label in (("meas", ""), ("vsc", " (self-calibrated)")):
             if kind not in case["disparity"]:
                 continue

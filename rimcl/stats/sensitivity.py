@@ -149,13 +149,17 @@ def _lookup(case, path):
 
 
 def _interval(case, path):
+    """The 95 % interval of the number at ``path``: ``<path>_ci95`` at the top level, else
+    its block's ``ci95``, per statistic (a dict) or of the block's one statistic (a list)."""
     if "." not in path:
         return case.get(f"{path}_ci95")
-    group, component, key = path.split(".")
-    return (case.get(group, {}).get(component, {}).get("ci95") or {}).get(key)
+    parent, key = path.rsplit(".", 1)
+    block = _lookup(case, parent)
+    interval = block.get("ci95") if isinstance(block, dict) else None
+    return interval.get(key) if isinstance(interval, dict) else interval
 
 
-def bands(case, variants):
+def bands(case, variants, paths=None, measured=MEASURED_VARIANTS):
     """The verdict of each headline number of a case against its variants.
 
     Parameters
@@ -163,7 +167,13 @@ def bands(case, variants):
     case : dict
         The case's ``stats.json`` entry (values and ``ci95``).
     variants : dict of str to dict
-        ``{variant name: headline_values(...)}``.
+        ``{variant name: {path: value}}`` (:func:`headline_values`).
+    paths : sequence of str, optional
+        The headline numbers' dotted paths in ``case`` (default: those of
+        :data:`HEADLINES`); each number's interval is its block's ``ci95``.
+    measured : sequence of str
+        The variants a run could measure again (default :data:`MEASURED_VARIANTS`): those
+        not in ``variants`` are the band's ``not_run``.
 
     Returns
     -------
@@ -177,12 +187,12 @@ def bands(case, variants):
         or "n/a").
     """
     result = {}
-    for path, _, _ in HEADLINES:
+    for path in [path for path, _, _ in HEADLINES] if paths is None else paths:
         value, interval = _lookup(case, path), _interval(case, path)
         found = {name: values.get(path) for name, values in variants.items()}
         found = {name: v for name, v in found.items() if v is not None}
         entry = {"value": value, "ci95": interval, "variants": found, "relative": {}}
-        entry["not_run"] = [name for name in MEASURED_VARIANTS if name not in variants]
+        entry["not_run"] = [name for name in measured if name not in variants]
         if value is None or not value or not found:
             entry.update(stable=None, text="n/a")
             result[path] = entry
