@@ -8,6 +8,7 @@ from scipy.ndimage import label
 from scipy.special import ndtr
 
 from rimcl.fields.field import Field
+from rimcl.imaging.frames import THRESHOLD_VARIANTS
 from rimcl.imaging.mie import MieWeights
 from rimcl.imaging.sensor import Sensor
 from rimcl.lpt.config import RigConfig
@@ -21,6 +22,8 @@ from rimcl.lpt.images import (
 )
 from rimcl.lpt.run import rig_cameras
 from rimcl.lpt.views import Tracer, uniform_field, view
+
+SUFFIXES = tuple(suffix for suffix, _ in THRESHOLD_VARIANTS)
 
 N0 = 1.333
 LENGTH_M = 0.1
@@ -194,8 +197,9 @@ def test_device_and_numpy_engines_measure_alike(lpt_flow, device, tmp_path):
     """run.engine = "device" (the image kernel on the rays' image points) against "numpy":
     C3 through the tiny flow, Mie weights, a noisy sensor, both passes. As for PTV: the
     same ray choice, flags and areas; where a camera's frame is the same on both engines
-    the located centroids are the same to the last bit, elsewhere within 1e-3 px; the
-    optics centroids within 1e-9 px, the peaks within 1e-12."""
+    the located centroids are the same to the last bit, elsewhere within 1e-3 px (also
+    those located at the threshold ×½ and ×2, whose flags are the same); the optics
+    centroids within 1e-9 px, the peaks within 1e-12."""
     from rimcl.lpt.config import parse_lpt_scene
     from rimcl.lpt.run import prepare
 
@@ -226,13 +230,15 @@ def test_device_and_numpy_engines_measure_alike(lpt_flow, device, tmp_path):
                     device_frames[kind, camera.name, k], numpy_frames[kind, camera.name, k]
                 )
                 same += identical
-                got, expected = (r[f"centroid_{kind}"][k, c] for r in (on_device, in_numpy))
-                if identical:
-                    np.testing.assert_array_equal(got, expected)
-                else:
-                    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-3)
+                for name in (f"centroid_{kind}", *(f"centroid_{kind}_{s}" for s in SUFFIXES)):
+                    got, expected = (r[name][k, c] for r in (on_device, in_numpy))
+                    if identical:
+                        np.testing.assert_array_equal(got, expected, err_msg=name)
+                    else:
+                        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-3, err_msg=name)
         for name, check in (
             (f"image_flags_{kind}", {"rtol": 0, "atol": 0}),
+            *((f"image_flags_{kind}_{s}", {"rtol": 0, "atol": 0}) for s in SUFFIXES),
             (f"optics_{kind}", {"rtol": 0, "atol": 1e-9}),
             (f"peak_{kind}", {"rtol": 1e-12, "atol": 0}),
         ):

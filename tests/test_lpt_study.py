@@ -11,6 +11,7 @@ from rimcl.cli.main import cli
 from rimcl.core.errors import RimclError
 from rimcl.lpt.config import CameraSpec, IlluminationConfig, LptSettings, RigConfig
 from rimcl.lpt.figures import FIGURE_NAMES
+from rimcl.lpt.sensitivity import HEADLINES
 from rimcl.scene.keys import SCENE_KEYS
 from rimcl.scene.keys_lpt import camera_keys
 from rimcl.scene.load import default_scene_text, load_scene
@@ -96,7 +97,13 @@ def test_study_runs_lpt(tmp_path, lpt_flow):
     for name in FIGURE_NAMES:
         for extension in ("png", "pdf", "json"):
             assert (out / "figures" / f"{name}.{extension}").is_file()
-    assert "LPT study" in (out / "summary.md").read_text()
+    summary = (out / "summary.md").read_text()
+    assert "LPT study" in summary
+    # every headline number has its threshold band and verdict, in the file and the summary
+    for case in cases.values():
+        assert set(case["sensitivity"]["bands"]) == set(HEADLINES)
+    for group in ("position", "velocity", "acceleration"):
+        assert summary.count(f"threshold ×½/×2 band, {group}: x1 ") == 2
     assert (out / "lpt" / "lpt_case_C3.h5").is_file()
     again = CliRunner().invoke(cli, ["study", str(scene), "--out", str(out)])
     assert again.exit_code == 0, again.output
