@@ -18,7 +18,7 @@ For each case of the scene (same tracers, same tracks, common random numbers):
 6. tracks are fitted (sliding polynomial, :func:`rimcl.ptv.track.sliding_fit`) and compared:
    refraction ``meas - ref`` (with and without the self-calibration) and baseline
    ``ref - true``, per component; the headline numbers again with every image located at
-   each camera's threshold ×½ and ×2 (:mod:`.sensitivity`).
+   each camera's threshold ×½ and ×2 (:mod:`rimcl.lpt.sensitivity`).
 
 Units: positions in field length units (``length_m`` metres each), image points in pixels,
 velocities in length/time units, accelerations in length/time² units; with the scene's time
