@@ -9,6 +9,7 @@ import tifffile
 from click.testing import CliRunner
 
 from rimcl.cli.main import cli
+from rimcl.lpt.calibration import SoloffModel, triangulate
 
 CAMERA = """
 [[rig.cameras]]
@@ -70,6 +71,23 @@ def test_render_writes_dataset(tmp_path, lpt_flow):
         assert set(h5["cameras"]) == {"left", "right"}
         assert "focal_length_mm" in json.loads(h5["cameras/left"].attrs["parameters"])
         centroids = h5["cameras/left/centroid_meas"][()]
+        # the threshold variants: each kind's positions are its centroids triangulated on
+        # the case's models (refitted here from the file's calibration target)
+        target, pixels = h5["calibration/target"][()], h5["calibration/pixels"][()]
+        models = [SoloffModel.fit(target, p) for p in pixels]
+        for suffix in ("threshold_half", "threshold_double"):
+            for kind in ("meas", "ref"):
+                points = np.stack(
+                    [h5[f"cameras/{n}/centroid_{kind}_{suffix}"][()] for n in ("left", "right")]
+                )
+                assert not np.array_equal(points[0], h5[f"cameras/left/centroid_{kind}"][()])
+                expected, _ = triangulate(models, points.reshape(2, -1, 2))
+                for axis, name in enumerate(("x1", "x2", "x3")):
+                    variant = h5[f"tracks/{name}_{kind}_{suffix}"]
+                    assert variant.attrs["units"] == "L0"
+                    np.testing.assert_allclose(
+                        variant[()].ravel(), expected[:, axis], rtol=0, atol=1e-9
+                    )
     # every group opens in xarray with named dimensions and units, holding the same numbers
     import xarray as xr
 

@@ -11,11 +11,14 @@ with named dimensions (HDF5 dimension scales) and a ``units`` attribute on every
   ``(id, frame)`` float64: ``x{1,2,3}_{true,meas,ref}``, ``x{1,2,3}_opt_{meas,ref}``
   (``L0``, field length units), ``u{1,2,3}_true`` (``L0/T0``), ``a{1,2,3}_true``
   (``L0/T0^2``); each with ``si_per_unit`` (metres, m/s, m/s², seconds per unit) where the
-  scales are known (``L0`` always, the others with ``time_s``);
+  scales are known (``L0`` always, the others with ``time_s``); at the threshold ×½ and ×2
+  (``<s>`` = ``threshold_half``, ``threshold_double``: every image located again at that
+  threshold, triangulated on the same models) ``x{1,2,3}_{meas,ref}_<s>``;
 - ``cameras/<name>/``: scales ``id``, ``frame``, ``pixel_axis`` (``column``, ``row``);
   ``centroid_{meas,ref}``, ``optics_{meas,ref}`` ``(id, frame, pixel_axis)`` (px, pixel
   (0, 0) centred on the top-left pixel), ``disparity_*`` ``(id, frame)`` (px),
-  ``image_flags_*``, ``peak_*``, ``failed_rays`` ``(id, frame)``; attributes ``parameters``
+  ``image_flags_*``, ``peak_*``, ``failed_rays`` ``(id, frame)``; at the variant thresholds
+  ``centroid_{meas,ref}_<s>`` and ``image_flags_{meas,ref}_<s>``; attributes ``parameters``
   (JSON: position, look-at, axes, optics), ``calibration`` (JSON: both fits and their
   residuals, px) and ``rays`` (JSON: the ray-count choice);
 - ``calibration/``: scales ``point``, ``axis`` (``x1, x2, x3``), ``camera``, ``pixel_axis``;
@@ -54,6 +57,7 @@ from rimcl.core.tables_h5 import (
     si_per_unit,
     write_variable,
 )
+from rimcl.stats.render_file import THRESHOLD_SUFFIXES
 from rimcl.stats.tables import write_json
 
 SCHEMA = "lpt_case"
@@ -122,6 +126,11 @@ def write_case(path, run, result, scene, overwrite=True):
                 f"x{axis + 1}_opt_meas": (result["x_opt_meas"], "L0"),
                 f"x{axis + 1}_opt_ref": (result["x_opt_ref"], "L0"),
                 f"x{axis + 1}_vsc": (result.get("x_vsc"), "L0"),
+                **{
+                    f"x{axis + 1}_{kind}_{suffix}": (result[f"x_{kind}_{suffix}"], "L0")
+                    for kind in ("meas", "ref")
+                    for suffix in THRESHOLD_SUFFIXES
+                },
                 f"u{axis + 1}_true": (run.u_true, "L0/T0"),
                 f"a{axis + 1}_true": (run.a_true, "L0/T0^2"),
             }
@@ -134,6 +143,12 @@ def write_case(path, run, result, scene, overwrite=True):
                 per_tracer(group, f"centroid_{kind}", result[f"centroid_{kind}"][:, c], "px")
                 per_tracer(group, f"optics_{kind}", result[f"optics_{kind}"][:, c], "px")
                 per_tracer(group, f"image_flags_{kind}", result[f"image_flags_{kind}"][:, c], "1")
+                for suffix in THRESHOLD_SUFFIXES:
+                    name = f"{kind}_{suffix}"
+                    per_tracer(group, f"centroid_{name}", result[f"centroid_{name}"][:, c], "px")
+                    per_tracer(
+                        group, f"image_flags_{name}", result[f"image_flags_{name}"][:, c], "1"
+                    )
                 per_tracer(group, f"peak_{kind}", result[f"peak_{kind}"][:, c], "1")
                 per_tracer(group, f"disparity_{kind}", result[f"disparity_{kind}"][..., c], "px")
                 disparity = result[f"disparity_opt_{kind}"][..., c]
