@@ -467,7 +467,7 @@ def sequence(
     exposures piv.dt apart per seed, through the field, with the dense truth and the
     particle tables.
 
-    The options and the scene are those of ``rimcl piv render``. Writes
+    The options and the scene are those of rimcl piv render. Writes
     PREFIX_seed<s>_<k>.tif and PREFIX_seed<s>_truth.h5 per seed (truth in px per frame,
     and in m/s with the scene's field.length_m and field.time_s).
 
