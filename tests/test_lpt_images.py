@@ -6,13 +6,12 @@ import numpy as np
 import pytest
 from scipy.ndimage import label
 from scipy.special import ndtr
+from test_lpt import N0, _cameras, _volume
 
 from rimcl.fields.field import Field
 from rimcl.imaging.frames import THRESHOLD_VARIANTS
 from rimcl.imaging.mie import MieWeights
 from rimcl.imaging.sensor import Sensor
-from rimcl.lpt.config import RigConfig
-from rimcl.lpt.flow import Volume
 from rimcl.lpt.images import (
     camera_imaging,
     locate_view,
@@ -20,34 +19,16 @@ from rimcl.lpt.images import (
     ray_light,
     rig_exposure,
 )
-from rimcl.lpt.run import rig_cameras
 from rimcl.lpt.views import Tracer, uniform_field, view
 
 SUFFIXES = tuple(suffix for suffix, _ in THRESHOLD_VARIANTS)
 
-N0 = 1.333
-LENGTH_M = 0.1
 ANGLES = (-30.0, -10.0, 10.0, 30.0)
-
-
-def _volume():
-    return Volume(
-        lo=np.zeros(3),
-        hi=np.ones(3),
-        x_end=1.0,
-        seed_lo=np.array([0.35, 0.1, 0.25]),
-        seed_hi=np.array([0.65, 0.9, 0.75]),
-        periodic=False,
-    )
 
 
 def _uniform():
     base = Field.from_arrays(np.zeros((2, 2, 2), np.float32), spacing=[1.0, 1.0, 1.0], n_ref=N0)
     return uniform_field(base)
-
-
-def _cameras():
-    return rig_cameras(RigConfig(), _volume(), LENGTH_M, N0)
 
 
 def _centre():

@@ -33,6 +33,22 @@ def _bump_field(x_sheet, depth):
     return Field.from_arrays(delta_n, spacing=spacing, origin=lo, n_ref=1.33)
 
 
+def _lens(scene):
+    """A 50 mm f/8 lens at M = 0.5 behind a 5 mm window, 64 x 48 pixels, 16 rays per tracer."""
+    return LensCamera(
+        scene,
+        length_m=0.05,
+        focal_length_mm=50.0,
+        f_number=8.0,
+        magnification=0.5,
+        pixel_pitch_um=200.0,
+        pixels=(64, 48),
+        rays=16,
+        fluid_index=1.33,
+        window=FlatWindow(thickness_mm=5.0),
+    )
+
+
 @pytest.fixture(scope="module")
 def scene_and_tracers():
     scene = Scene(0.05, 1.05, np.zeros(2), np.ones(2), False)
@@ -71,18 +87,7 @@ def test_device_light_matches_numpy_within_ulps(device, scene_and_tracers, mie):
 
 def test_lens_behind_a_window_with_noise_gives_the_same_counts(device, scene_and_tracers):
     scene, imaging, tracers, field = scene_and_tracers
-    camera = LensCamera(
-        scene,
-        length_m=0.05,
-        focal_length_mm=50.0,
-        f_number=8.0,
-        magnification=0.5,
-        pixel_pitch_um=200.0,
-        pixels=(64, 48),
-        rays=16,
-        fluid_index=1.33,
-        window=FlatWindow(thickness_mm=5.0),
-    )
+    camera = _lens(scene)
     imaging = PivImaging(pixels=64, sheet_thickness=4 * camera.pixel_size, bit_depth=12)
     moved = tracers + np.array([0.0, 0.6, -0.3]) * camera.pixel_size
     positions = np.stack([tracers, moved])
@@ -140,18 +145,7 @@ def test_lens_rays_are_aimed_through_the_field_in_both_engines(device, scene_and
     x2 = lo[1] + spacing[1] * np.arange(counts[1])
     delta_n = np.broadcast_to(0.05 * x2[None, :, None], (10, 10, 6)).copy()  # (x3, x2, x1)
     field = Field.from_arrays(delta_n, spacing=spacing, origin=lo, n_ref=1.33)
-    camera = LensCamera(
-        scene,
-        length_m=0.05,
-        focal_length_mm=50.0,
-        f_number=8.0,
-        magnification=0.5,
-        pixel_pitch_um=200.0,
-        pixels=(64, 48),
-        rays=16,
-        fluid_index=1.33,
-        window=FlatWindow(thickness_mm=5.0),
-    )
+    camera = _lens(scene)
     imaging = PivImaging(pixels=64, sheet_thickness=4 * camera.pixel_size, bit_depth=12)
     inside = tracers[(tracers[:, 1] > 0.2) & (tracers[:, 1] < 0.8)]
     inside = inside[(inside[:, 2] > 0.2) & (inside[:, 2] < 0.8)]
