@@ -4,9 +4,10 @@ sets the refractive index.
 
 The scalar is a density, temperature, salinity, refractive index or index difference δn,
 found by name, by its CF ``standard_name`` or named by the caller; its ``units`` attribute
-(K, degC, kg m-3, g/kg, 1, ...) says how to read it. Temperature and salinity become a
-refractive index through :mod:`rimcl.fields.media` (the fluid named at import, at its
-wavelength), so the field file stores ``delta_n`` and runs "as is"; a density stays a
+(K, degC, kg m-3, g/kg, 1, ...: :mod:`rimcl.fields.cf_units`, through cf-units) says how to
+read it, and a temperature, salinity or density without one is refused. Temperature and
+salinity become a refractive index through :mod:`rimcl.fields.media` (the fluid named at
+import, at its wavelength), so the field file stores ``delta_n`` and runs "as is"; a density stays a
 density (``ρ / 1000 kg m-3`` when given in kg m-3, so that the water case C4, ``G = 0.334``,
 is water's Gladstone–Dale product). Each file records what its scalar was (root attribute
 ``scalar``), so that a case is never applied to a scalar it does not fit.
@@ -16,8 +17,11 @@ Axes: every spatial dimension gets a letter ``x, y, z`` from its coordinate's ``
 The caller names the camera's depth axis; it becomes ``x1``, and the two others become
 ``x2`` (the faster-varying in the file) and ``x3``. Velocity components (``u, v, w``, CF
 ``*_x_velocity`` names or one ``velocity`` array with a trailing component axis of 3) are
-permuted alike. Coordinates in m, cm, mm or µm and times in s or ms give the field's
-``length_m`` and ``time_s`` (metres and seconds per field unit), recorded in the file.
+permuted alike; two candidates for one component are refused. A coordinate with
+``positive = "down"`` is turned up (values negated, nodes reversed; its velocity component
+changes sign unless its ``standard_name`` says upward). Coordinates in any length unit and
+times in any time unit (``hours since ...``) give the field's ``length_m`` and ``time_s``
+(metres and seconds per field unit), recorded in the file.
 
 ``.npz`` files follow the JHTDB convention of :mod:`rimcl.fields.jhtdb` (arrays
 ``(nz, ny, nx)`` or ``(nt, nz, ny, nx)``, coordinates ``x, y, z`` or ``xcoor, ycoor,
@@ -36,6 +40,13 @@ import numpy as np
 from rimcl.core.atomic import check_output
 from rimcl.core.errors import RimclError, first_line
 from rimcl.core.memory import check_import_memory
+from rimcl.fields.cf_units import (
+    check_relative_density,
+    length_factor,
+    scalar_conversion,
+    time_factor,
+)
+from rimcl.fields.cf_velocity import read_velocity, velocity_variables
 from rimcl.fields.derivatives import gradient as compute_gradient
 from rimcl.fields.field_writer import write_field
 from rimcl.fields.jhtdb import (
@@ -46,7 +57,7 @@ from rimcl.fields.jhtdb import (
     open_npz,
     parse_frames,
 )
-from rimcl.fields.media import ZERO_CELSIUS_K, Fluid
+from rimcl.fields.media import Fluid
 from rimcl.fields.zarr_input import is_zarr_store, zarr_variables
 
 #: What a field file's scalar can be (its root attribute ``scalar``).
@@ -68,30 +79,8 @@ _NAMES = {
     "index": ("refractive_index", "index", "n"),
     "delta_n": ("delta_n", "dn"),
 }
-# units: factor and offset to the stored unit (°C, g/kg, dimensionless)
-_UNITS = {
-    "temperature": {
-        ("k", "kelvin", "degk", "deg_k", "degrees_k"): (1.0, -ZERO_CELSIUS_K),
-        ("degc", "deg_c", "°c", "celsius", "degree_celsius", "degrees_celsius", "degrees_c",
-         "c", "oc"): (1.0, 0.0),
-    },
-    "salinity": {
-        ("g/kg", "g kg-1", "g kg^-1", "g.kg-1", "1e-3", "0.001", "psu", "pss-78"): (1.0, 0.0),
-        ("1", "kg/kg", "kg kg-1"): (1000.0, 0.0),
-    },
-    "density": {
-        ("kg m-3", "kg/m3", "kg/m^3", "kg m^-3", "kg.m-3", "kg m**-3"): (1e-3, 0.0),
-        ("g/cm3", "g cm-3", "g/cm^3", "1", ""): (1.0, 0.0),
-    },
-    "index": {("1", ""): (1.0, 0.0)},
-    "delta_n": {("1", ""): (1.0, 0.0)},
-}  # fmt: skip
 _STORED_UNIT = {"temperature": "degC", "salinity": "g/kg", "density": "1 (rho / 1000 kg m-3)",
                 "index": "1", "delta_n": "1"}  # fmt: skip
-_LENGTHS = {**dict.fromkeys(("m", "metre", "meter", "metres", "meters"), 1.0), "cm": 1e-2,
-            "mm": 1e-3, **dict.fromkeys(("um", "µm", "micrometre", "micron"), 1e-6)}  # fmt: skip
-_TIMES = {**dict.fromkeys(("s", "sec", "second", "seconds"), 1.0), "ms": 1e-3,
-          **dict.fromkeys(("min", "minute", "minutes"), 60.0)}  # fmt: skip
 _AXIS_NAMES = {
     "x": ("x", "xc", "xcoor", "x1", "lon", "longitude", "i", "nx"),
     "y": ("y", "yc", "ycoor", "x2", "lat", "latitude", "j", "ny"),
@@ -100,14 +89,6 @@ _AXIS_NAMES = {
 _AXIS_STANDARD = {"projection_x_coordinate": "x", "longitude": "x", "grid_longitude": "x",
                   "projection_y_coordinate": "y", "latitude": "y", "grid_latitude": "y",
                   "depth": "z", "height": "z", "altitude": "z"}  # fmt: skip
-_VELOCITY_NAMES = {
-    "x": ("u", "ux", "u_x", "u1", "velocity_x", "vx", "x_velocity"),
-    "y": ("v", "uy", "u_y", "u2", "velocity_y", "vy", "y_velocity"),
-    "z": ("w", "uz", "u_z", "u3", "velocity_z", "vz", "z_velocity"),
-}
-_VELOCITY_STANDARD = {"x": ("_x_velocity", "eastward_", "x_wind"),
-                      "y": ("_y_velocity", "northward_", "y_wind"),
-                      "z": ("_z_velocity", "upward_")}  # fmt: skip
 _TIME_NAMES = ("time", "t", "times")
 _NETCDF_DIMENSION_ONLY = "This is a netCDF dimension but not a netCDF variable"
 
@@ -272,18 +253,6 @@ def _quantity_of(var, path, strict=True):
     return None
 
 
-def _convert_scalar(values, quantity, units, name):
-    """Values in the stored unit (°C, g/kg, dimensionless)."""
-    key = _norm_unit(units)
-    for names, (factor, offset) in _UNITS[quantity].items():
-        if key in names:
-            return values * factor + offset
-    known = ", ".join(sorted({n for names in _UNITS[quantity] for n in names if n}))
-    raise RimclError(
-        f"{name}: units {units!r} are not known for a {quantity} (known: {known}); give --units"
-    )
-
-
 def _axis_letters(spatial, variables):
     """Letter ``x, y, z`` of each spatial dimension (in the variable's order)."""
     letters = {}
@@ -322,57 +291,6 @@ def _depth_letter(depth_axis, letters, path):
         f"--depth-axis {depth_axis!r} is not a dimension of the scalar "
         f"({', '.join(f'{d} ({a})' for d, a in letters.items())})"
     )
-
-
-def _velocity_variables(variables, letters, velocity, path):
-    """The velocity variables along ``x, y, z`` (or one with a component axis), or None."""
-    if velocity is not None:
-        names = [n.strip() for n in str(velocity).split(",")]
-        if len(names) == 1 and names[0] in variables:
-            return names[0]
-        if len(names) != 3 or any(n not in variables for n in names):
-            raise RimclError(
-                f"--velocity names the x, y, z components ('u,v,w'), got {velocity!r} "
-                f"(variables: {', '.join(sorted(variables))})"
-            )
-        return dict(zip(("x", "y", "z"), names, strict=True))
-    if "velocity" in variables and variables["velocity"].dims[-1:] == ("component",):
-        return "velocity"
-    chosen = {}
-    for letter in ("x", "y", "z"):
-        for var in variables.values():
-            standard = str(var.attrs.get("standard_name", "")).lower()
-            if var.name.lower() in _VELOCITY_NAMES[letter] or (
-                standard and any(part in standard for part in _VELOCITY_STANDARD[letter])
-            ):
-                chosen.setdefault(letter, var.name)
-    if not chosen:
-        return None
-    if len(chosen) != 3:
-        raise RimclError(
-            f"{path} has velocity along {', '.join(sorted(chosen))} only; rimcl needs all "
-            "three components (or none): name them with --velocity u,v,w"
-        )
-    return chosen
-
-
-def _length_factor(units):
-    return _LENGTHS.get(_norm_unit(units))
-
-
-def _velocity_factor(units):
-    """Metres per second of one unit of a velocity, or None."""
-    text = _norm_unit(units).replace("^", "")
-    match = re.fullmatch(r"(\S+?)\s*(?:/\s*|\s+)(\S+?)(?:-1)?", text)
-    if not match:
-        return None
-    length, time = _LENGTHS.get(match.group(1)), _TIMES.get(match.group(2))
-    return None if length is None or time is None else length / time
-
-
-def _time_factor(units):
-    text = _norm_unit(units)
-    return _TIMES.get(text.split(" since ")[0]) if text else None
 
 
 # ---------------------------------------------------------------- the import
@@ -515,6 +433,9 @@ def _read(path, variables, depth_axis, variable, quantity, units, velocity, crop
         )
     letters = _axis_letters(spatial, variables)
     depth = _depth_letter(depth_axis, letters, path)
+    # a coordinate with positive = "down" (a depth) is turned up: its values negated and
+    # its nodes (and the data along it) reversed, so that rimcl's axes stay right-handed
+    down = [d for d in spatial if _positive_down(variables.get(d))]
     others = [letters[d] for d in spatial if letters[d] != depth]
     axes = (depth, others[1], others[0])  # x2: the faster-varying of the two others
     dim_of = {letter: dim for dim, letter in letters.items()}
@@ -523,22 +444,30 @@ def _read(path, variables, depth_axis, variable, quantity, units, velocity, crop
     # order the file's spatial axes as (z, y, x), the layout's input order
     to_zyx = tuple(spatial.index(dim_of[a]) for a in ("z", "y", "x"))
     coordinates, length_m = _coordinates(variables, dim_of, counts, path)
+    for dim in down:
+        coordinates[letters[dim]] = -coordinates[letters[dim]][::-1]
     origin, spacing, nodes = layout.grid(coordinates)
     n_frames = scalar.shape[0] if time_dims else 1
     times, time_s = _times(variables, time_dims, n_frames, t0, dt, path)
+    unit_text = units if units is not None else scalar.attrs.get("units", "")
+    # refused before any frame is read: units missing, unknown or of another quantity
+    factor, offset = scalar_conversion(
+        quantity, unit_text, scalar.name, scalar.attrs.get("standard_name", "")
+    )
     wanted = parse_frames(frames)
     wanted = list(range(1, n_frames + 1)) if wanted is None else wanted
     if max(wanted) > n_frames:
         raise RimclError(f"{path} has frames 1..{n_frames}; no frame {max(wanted)}")
-    vel = _velocity_variables(variables, letters, velocity, path)
+    vel = velocity_variables(variables, scalar.dims, velocity, path)
     check_import_memory(nodes[::-1], len(wanted), vel is not None, f"importing {path}")
-    unit_text = units if units is not None else scalar.attrs.get("units", "")
+    flip_axes = tuple(spatial.index(d) for d in down)
 
     def frame_of(var, k):
         selection = (k - 1,) if time_dims else ()
         values = var.read(selection)
         if values.shape != tuple(counts[letters[d]] for d in spatial):
             raise RimclError(f"{path}: {var.name} does not match the grid of {scalar.name}")
+        values = np.flip(values, flip_axes) if flip_axes else values
         zyx = np.transpose(values, to_zyx)[layout.selection]
         if not np.all(np.isfinite(zyx)):
             raise RimclError(f"{path}: {var.name} holds NaN, fill or infinite values")
@@ -546,12 +475,24 @@ def _read(path, variables, depth_axis, variable, quantity, units, velocity, crop
 
     values = []
     for k in wanted:
-        converted = _convert_scalar(frame_of(scalar, k), quantity, unit_text, scalar.name)
+        converted = frame_of(scalar, k) * factor + offset
         values.append(np.ascontiguousarray(np.transpose(converted, layout.order)))
+    scalar_range = [float(min(v.min() for v in values)), float(max(v.max() for v in values))]
+    if quantity == "density":
+        check_relative_density(scalar_range, unit_text, scalar.name)
     flow_velocity, velocity_note = None, None
     if vel is not None:
-        flow_velocity, velocity_note, time_s = _read_velocity(
-            variables, vel, wanted, frame_of, layout, length_m, time_s, time_dims
+        up = {letters[d] for d in down}
+        flow_velocity, velocity_note, time_s = read_velocity(
+            variables,
+            vel,
+            wanted,
+            frame_of,
+            layout,
+            length_m,
+            time_s,
+            up,
+            timed=bool(time_dims) and time_dims[0] in variables and time_s is None,
         )
     attrs = {
         **layout.provenance(_container(path), [path], wanted),
@@ -559,11 +500,13 @@ def _read(path, variables, depth_axis, variable, quantity, units, velocity, crop
         "scalar": quantity,
         "scalar_variable": scalar.name,
         "scalar_units": str(unit_text),
-        "scalar_range": [float(min(v.min() for v in values)), float(max(v.max() for v in values))],
+        "scalar_range": scalar_range,
         "scalar_stored_unit": _STORED_UNIT[quantity],
     }
     if velocity_note:
         attrs["velocity_units"] = velocity_note
+    if down:
+        attrs["turned_up"] = ",".join(down)  # positive = "down" in the input
     for key in ("n_ref", "reference_index"):
         if quantity == "delta_n" and key in scalar.attrs:
             attrs["n_ref"] = float(np.asarray(scalar.attrs[key]).reshape(-1)[0])
@@ -585,6 +528,13 @@ def _container(path):
     if path.suffix.lower() == ".npz":
         return "npz"
     return "CF Zarr store" if is_zarr_store(path) else "CF dataset"
+
+
+def _positive_down(coordinate):
+    """Whether a coordinate variable says its values grow downwards (CF ``positive``)."""
+    if coordinate is None:
+        return False
+    return str(coordinate.attrs.get("positive", "")).strip().lower() == "down"
 
 
 def _is_time(variables, dim):
@@ -615,7 +565,7 @@ def _coordinates(variables, dim_of, counts, path):
                 f"{path}: coordinate {dim} has {values.size} values, not {counts[letter]}"
             )
         coordinates[letter] = values
-        factors[letter] = _length_factor(var.attrs.get("units"))
+        factors[letter] = length_factor(var.attrs.get("units"), f"{path}: {dim}")
     known = set(factors.values())
     if None in known:
         return coordinates, None
@@ -632,42 +582,8 @@ def _times(variables, time_dims, n_frames, t0, dt, path):
         times = var.read(()).reshape(-1)
         if times.size != n_frames:
             raise RimclError(f"{path}: {var.name} has {times.size} values for {n_frames} frames")
-        return times, _time_factor(var.attrs.get("units"))
+        return times, time_factor(var.attrs.get("units"), f"{path}: {var.name}")
     return t0 + dt * np.arange(n_frames), None
-
-
-def _read_velocity(variables, vel, wanted, frame_of, layout, length_m, time_s, time_dims):
-    """Velocity frames in field length per field time, along ``x1, x2, x3``."""
-    if isinstance(vel, str):
-        var = variables[vel]
-        parts = {}
-        for letter, component in zip(("x", "y", "z"), range(3), strict=True):
-            parts[letter] = _Variable(
-                var.name, var.dims[:-1], var.attrs, var.shape[:-1],
-                lambda sel=(), c=component: var.read(sel)[..., c],
-            )  # fmt: skip
-        unit = var.attrs.get("units")
-    else:
-        parts = {letter: variables[name] for letter, name in vel.items()}
-        units = {str(v.attrs.get("units", "")) for v in parts.values()}
-        if len(units) > 1:
-            raise RimclError(f"the velocity components have different units: {sorted(units)}")
-        unit = units.pop()
-    factor, note = 1.0, "field length per field time (the file gives no units)"
-    speed = _velocity_factor(unit) if unit else None
-    if speed is not None:
-        if length_m is None:
-            note = f"{unit} (the coordinates give no length unit)"
-        else:
-            if time_s is None:
-                time_s = 1.0  # the velocity's own unit fixes the time unit: seconds
-            factor = speed / (length_m / time_s)
-            note = f"converted from {unit} to field units (x {factor:g})"
-    frames = []
-    for k in wanted:
-        stacked = np.stack([frame_of(parts[a], k) for a in ("x", "y", "z")], axis=-1) * factor
-        frames.append(layout.vector(stacked))
-    return frames, note, time_s
 
 
 def _index_of(imported, fluid):
