@@ -52,3 +52,18 @@ def test_ghosts_grow_with_the_tolerance_at_a_high_density():
     assert tight["true"] == loose["true"] == 1200
     assert loose["ghosts"] > tight["ghosts"] and loose["ghosts"] > 0
     assert loose["ghost_fraction"] == loose["ghosts"] / loose["matches"]
+
+
+def test_no_candidate_pair_is_no_match_not_a_crash():
+    """Two tracers whose images no epipolar curve reaches (or no image at all in the first
+    camera): nothing matched, every tracer missed."""
+    volume, cameras, models = _rig()
+    points = volume.seed(2, np.random.default_rng(4))
+    pixels = np.stack([c.project(points) for c in cameras])
+    pixels[-1] += 60.0  # the last camera's images far off every curve
+    result = match_frame(models, pixels, 0.5)
+    assert (result["matches"], result["true"], result["missed"]) == (0, 0, 2)
+    assert result["ghost_fraction"] is None and result["missed_fraction"] == 1.0
+    pixels[0] = np.nan  # the first camera located nothing
+    result = match_frame(models, pixels, 0.5)
+    assert (result["matches"], result["tracers"], result["missed"]) == (0, 0, 2)

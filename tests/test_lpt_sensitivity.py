@@ -131,6 +131,9 @@ def test_a_variant_that_loses_every_image_is_left_out_of_the_band(measured):
             band["variants"]["threshold ×2"]
             == stats["sensitivity"]["bands"][path]["variants"]["threshold ×2"]
         )
+        # never "stable": the band lacks a variant, and says which and why
+        assert band["stable"] is None and band["text"] == "n/a: threshold ×½ lost every tracer"
+        assert band["tracers_lost"] == ["threshold ×½"]
 
 
 def test_verdict_is_the_ptv_rule_on_lpt_paths():
@@ -151,3 +154,94 @@ def test_verdict_is_the_ptv_rule_on_lpt_paths():
     assert result[paths[0]]["stable"] is False
     assert result[paths[1]]["ci95"] == [0.09, 0.11]
     assert result[paths[1]]["text"] == "stable"
+
+
+# ---------------------------------------------------------------- n/a, never an accident
+
+
+def _statistics(run, scene, result):
+    """A case's statistics as ``lpt run`` writes them (units, band), checked JSON-able."""
+    import json
+
+    from rimcl.lpt.run import FLAG_IMAGE_LOST, case_statistics
+    from rimcl.lpt.units import case_units
+
+    stats = case_statistics(run, result, scene)
+    stats["units"] = case_units(stats, 1.0, run.length_m, run.time_s)
+    kept = (result["flags"] & ~FLAG_IMAGE_LOST) == 0
+    stats["sensitivity"] = threshold_sensitivity(run, result, stats, kept, scene)
+    json.dumps(stats, allow_nan=False)  # no NaN anywhere
+    return stats
+
+
+def test_a_case_that_kept_no_tracer_is_n_a_with_its_reason(measured):
+    """Every image lost (dim cameras, a tiny sensor): every number n/a, the reason named,
+    and the statistics still JSON (they were NaN, and writing them crashed)."""
+    from rimcl.lpt.run import FLAG_IMAGE_LOST, summary_lines
+
+    run, scene, result, _, _ = measured
+    lost = {**result, "flags": np.full_like(result["flags"], FLAG_IMAGE_LOST)}
+    stats = _statistics(run, scene, lost)
+    assert stats["tracers_kept"] == 0 and stats["excluded"]["image_lost"] == 30
+    assert stats["no_tracer"].startswith("no tracer kept of 30 (30 an image was not found")
+    for path in HEADLINES:
+        assert _lookup(stats, path) is None, path
+    document = {"tracers": 30, "times": run.times.tolist(), "length_m": run.length_m,
+                "cases": {"C3": {**stats, "rays": result["rays"], "n_ref": 1.33,
+                                 "calibration_residual_px": {"a": {"soloff": 0.0}}}}}  # fmt: skip
+    text = "\n".join(summary_lines(document))
+    assert "n/a: no tracer kept of 30" in text and "nan" not in text.lower()
+
+
+def test_an_unresolved_shift_is_not_resolved_not_a_measured_zero(measured):
+    """Rays that moved but located images that did not: the refraction is not resolved."""
+    run, scene, result, _, _ = measured
+    same = {**result, "centroid_meas": result["centroid_ref"].copy()}
+    assert np.any(result["optics_meas"] != result["optics_ref"])
+    stats = _statistics(run, scene, same)
+    assert "below what these cameras resolve" in stats["not_resolved"]
+    # the case's own images moved: resolved
+    assert _statistics(run, scene, result)["not_resolved"] is None
+
+
+def test_pixels_are_per_camera_and_do_not_depend_on_camera_order(measured):
+    """Two cameras of different pixels (at the object): "px" is on their mean, whichever
+    camera comes first (it was the first camera's), and per camera beside it."""
+    from types import SimpleNamespace
+
+    run, scene, result, _, _ = measured
+    pixel = result["cameras"][0].pixel_size
+    cameras = [SimpleNamespace(name="a", pixel_size=pixel),
+               SimpleNamespace(name="b", pixel_size=2 * pixel)]  # fmt: skip
+    stats, other = (
+        _statistics(run, scene, {**result, "cameras": order}) for order in (cameras, cameras[::-1])
+    )
+    assert stats["pixel_size_per_camera"] == {"a": pixel, "b": 2 * pixel}
+    assert stats["pixel_size"] == other["pixel_size"] == 1.5 * pixel
+    for axis in ("x1", "x2", "x3"):
+        block = stats["position"][axis]
+        rms = block["refraction"]["rms"]
+        assert block["refraction_rms_px"] == other["position"][axis]["refraction_rms_px"]
+        assert block["refraction_rms_px"] == rms / (1.5 * pixel)
+        assert block["refraction_rms_px_per_camera"] == {"a": rms / pixel, "b": rms / (2 * pixel)}
+
+
+def test_a_round_off_truth_gives_no_ratio(measured):
+    """A uniform flow's true acceleration is 0 up to round-off: no rms(ε)/rms(truth) of it
+    (it printed a baseline of 9.5e9), the absolute errors kept."""
+    import dataclasses
+
+    run, scene, result, stats, _ = measured
+    still = dataclasses.replace(run, a_true=np.full_like(run.a_true, 3e-17))
+    guarded = _statistics(still, scene, result)
+    for axis in ("x1", "x2", "x3"):
+        block = guarded["acceleration"][axis]
+        assert block["refraction"]["rms_normalized"] is None
+        assert block["baseline"]["rms_normalized"] is None
+        assert "0 up to round-off" in block["ratio_na"]
+        assert (
+            block["absolute"]["refraction"] == stats["acceleration"][axis]["absolute"]["refraction"]
+        )
+        # the velocity's truth is no round-off: its ratios stand
+        assert guarded["velocity"][axis]["refraction"]["rms_normalized"] is not None
+        assert "ratio_na" not in guarded["velocity"][axis]

@@ -92,15 +92,18 @@ def match_frame(models, pixels, tolerance_px):
         first += [a] * int(close.sum())
         second += list(candidates[close])
     first, second = np.asarray(first, dtype=np.int64), np.asarray(second, dtype=np.int64)
+    valid, same = np.zeros(first.size, dtype=bool), first == second
     # every candidate pair at once: triangulated on the first two cameras, then looked for
-    # in the others
-    pair = np.stack([pixels[0, first], pixels[last, second]])
-    positions, _ = triangulate([models[0], models[last]], pair)
-    valid = np.all(np.isfinite(positions), axis=1)
-    same = first == second
+    # in the others (no pair at all, with few tracers: nothing matched)
+    if first.size:
+        pair = np.stack([pixels[0, first], pixels[last, second]])
+        positions, _ = triangulate([models[0], models[last]], pair)
+        valid = np.all(np.isfinite(positions), axis=1)
     for c in range(1, last):
-        projected = models[c].project(np.nan_to_num(positions))
-        distance, index = trees[c].query(projected) if len(first) else (np.zeros(0), [])
+        if not (first.size and seen[c].size):
+            valid[:] = False
+            break
+        distance, index = trees[c].query(models[c].project(np.nan_to_num(positions)))
         valid &= distance <= tolerance_px
         same &= seen[c][np.asarray(index, dtype=np.int64)] == first
     true = int(np.sum(valid & same))

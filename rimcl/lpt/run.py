@@ -34,6 +34,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.imaging.frames import THRESHOLD_VARIANTS
+from rimcl.lpt import checks
 from rimcl.lpt.calibration import PinholeModel, SoloffModel, target_points, triangulate
 from rimcl.lpt.config import CameraSpec, preset_cameras
 from rimcl.lpt.config import describe as describe_scene
@@ -51,7 +52,6 @@ from rimcl.lpt.images import (
 )
 from rimcl.lpt.matching import match_frame
 from rimcl.lpt.rig import RigCamera
-from rimcl.lpt.selfcal import self_calibrate
 from rimcl.lpt.sensitivity import band_lines, threshold_sensitivity
 from rimcl.lpt.units import COMPONENTS, case_units
 from rimcl.lpt.views import Tracer, choose_ray_count, uniform_field, view
@@ -205,22 +205,16 @@ def calibrate_rig(cameras, volume, settings):
         settings.calibration_planes,
         settings.calibration_grid,
     )
+    projected = [camera.project(target) for camera in cameras]
+    seen = checks.visible_target(cameras, target, projected)  # fitted and exported: these only
+    target = target[seen]
     fitted = []
-    for camera in cameras:
-        pixels = camera.project(target)
-        if not np.all(np.isfinite(pixels)):
-            raise RimclError(f"camera {camera.name} cannot see every calibration point")
+    for pixels in projected:
+        pixels = pixels[seen]
         pinhole = PinholeModel.fit(target, pixels)
         soloff = SoloffModel.fit(target, pixels)
         fitted.append({"pinhole": pinhole, "soloff": soloff, "pixels": pixels})
     return target, fitted
-
-
-def _off_sensor(camera, pixels):
-    columns, rows = pixels[..., 0], pixels[..., 1]
-    inside = (columns >= -0.5) & (columns <= camera.pixels[0] - 0.5)
-    inside &= (rows >= -0.5) & (rows <= camera.pixels[1] - 0.5)
-    return ~inside
 
 
 def _sensor_and_mie(scene, n_ref):
@@ -373,17 +367,15 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     pinhole = [f["pinhole"] for f in fitted]
     pinhole_ref = triangulate_frames(pinhole, centroid["ref"])[0]
     timings["triangulation"] = time.perf_counter() - started
-    calibrated = None
+    calibrated, calibration_record = None, None
     if settings.self_calibration:
         started = time.perf_counter()
         every = np.moveaxis(centroid["meas"], 1, 0).reshape(ncam, frames * count, 2)
-        calibrated = self_calibrate(
-            models,
-            every,
-            settings.self_calibration_cells,
-            settings.self_calibration_iterations,
-        )
-        positions["vsc"], disparity["vsc"] = triangulate_frames(calibrated.models, centroid["meas"])
+        calibrated, calibration_record = checks.self_calibration(models, every, settings)
+        if calibrated is not None:
+            positions["vsc"], disparity["vsc"] = triangulate_frames(
+                calibrated.models, centroid["meas"]
+            )
         timings["self_calibration"] = time.perf_counter() - started
     matching = None
     if settings.model == "soloff":
@@ -403,7 +395,7 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     flags[np.any(failed > 0, axis=(0, 1))] |= FLAG_RAY_FAILED
     off = np.zeros(count, dtype=bool)
     for c, camera in enumerate(cameras):
-        off |= np.any(_off_sensor(camera, optics["ref"][:, c]), axis=0)
+        off |= np.any(~checks.on_sensor(camera, optics["ref"][:, c]), axis=0)
     flags[off] |= FLAG_OFF_SENSOR
     lost = np.zeros(count, dtype=bool)
     for kind in kinds:
@@ -428,7 +420,7 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
         "exposure": exposure.describe(),
         "sensor": sensor.describe(),
         "mie": None if mie is None else mie.describe(),
-        "self_calibration": None if calibrated is None else calibrated.describe(),
+        "self_calibration": calibration_record,
         "matching": matching,
         "x_ref_pinhole": pinhole_ref,
         "failed_rays": failed,
@@ -516,7 +508,7 @@ def case_statistics(run, result, scene):
     frames = run.true.shape[0]
     ids = np.broadcast_to(np.arange(keep.size), (frames, keep.size))[:, keep].ravel()
     bootstrap = TracerBootstrap(np.flatnonzero(keep))
-    pixel = result["cameras"][0].pixel_size
+    pixel_per_camera, pixel = checks.pixel_sizes(result["cameras"])
     stats = {"tracers": int(keep.size), "tracers_kept": int(keep.sum())}
     stats["excluded"] = {
         "ray_failed": int(np.sum(result["flags"] & FLAG_RAY_FAILED > 0)),
@@ -540,12 +532,18 @@ def case_statistics(run, result, scene):
             if x_vsc is None
             else rms_interval((x_vsc - x_ref)[..., axis].ravel(), ids, bootstrap),
             "refraction_rms_px": None if refraction["rms"] is None else refraction["rms"] / pixel,
+            "refraction_rms_px_per_camera": None
+            if refraction["rms"] is None
+            else {name: refraction["rms"] / size for name, size in pixel_per_camera.items()},
             "refraction_rms_um": None
             if refraction["rms"] is None
             else refraction["rms"] * run.length_m * 1e6,
         }
     stats["position"] = position
-    stats["pixel_size"] = pixel
+    stats["pixel_size"] = pixel  # the mean of the cameras': their order does not matter
+    stats["pixel_size_per_camera"] = pixel_per_camera
+    stats["no_tracer"] = checks.no_tracer_reason(stats)
+    stats["not_resolved"] = checks.not_resolved(result, keep)
     disparity = {}
     for kind in ("meas", "ref", "opt_meas", "opt_ref", "vsc"):
         if f"disparity_{kind}" not in result:
@@ -616,6 +614,7 @@ def case_statistics(run, result, scene):
             block[name]["truth_rms"] = (
                 float(np.sqrt(np.mean(truth[..., axis] ** 2))) if truth.size else None
             )
+            checks.guard_ratios(block[name], label, checks.roundoff_floor(run, label))
         stats[label] = block
     stats["fit"] = {"window": window, "order": order, "dt": dt}
     return stats
@@ -683,7 +682,7 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
                 result["x_ref_pinhole"][:, result["flags"] == 0] - run.true[:, result["flags"] == 0]
             )
             stats["pinhole_baseline_rms"] = {
-                name: float(np.sqrt(np.nanmean(pinhole_baseline[..., a] ** 2)))
+                name: checks.finite_rms(pinhole_baseline[..., a])
                 for a, name in enumerate(COMPONENTS)
             }
             stats["n_ref"] = result["n_ref"]
@@ -728,6 +727,7 @@ def summary_lines(document):
             f"{name}: n_ref {case['n_ref']:.6f}; rays per tracer {rays}; Soloff calibration "
             f"residual up to {residual:.3g} px; {case['tracers_kept']}/{case['tracers']} tracers"
         )
+        lines.extend(checks.reason_lines(case))
         pos = case["position"]
         lines.append(
             "  position refraction rms (px): "

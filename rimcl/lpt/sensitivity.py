@@ -10,7 +10,9 @@ image the variant threshold loses in some camera and frame is left out of that v
 only), its tracks fitted by the same sliding polynomial, and the headline numbers of
 :data:`HEADLINES` computed as the case's statistics compute them. The verdict per number is
 PTV's rule (:func:`rimcl.stats.sensitivity.bands`): *stable* where every variant lies in
-the number's bootstrap 95 % interval, else *depends on threshold ×2 by +Y %*.
+the number's bootstrap 95 % interval, else *depends on threshold ×2 by +Y %*; a variant that
+kept no tracer makes the band n/a and says so, and one that kept fewer than half the case's
+tracers is named with its count.
 """
 
 import numpy as np
@@ -122,7 +124,33 @@ def threshold_sensitivity(run, result, case, kept_but_images, scene):
             times.fit_window,
             times.fit_order,
         )
-    return {"variants": variants, "bands": bands(case, variants, HEADLINES, measured=())}
+    return {
+        "variants": variants,
+        "bands": _tracers_lost(
+            bands(case, variants, HEADLINES, measured=()), variants, case["tracers_kept"]
+        ),
+    }
+
+
+def _tracers_lost(entries, variants, kept):
+    """Say it in each band where a variant kept no tracer (its numbers are missing, so the
+    band cannot be stable) or fewer than half the case's ``kept``."""
+    empty = [name for name, values in variants.items() if values["n_used"] == 0]
+    thin = [
+        f"{name} kept {values['n_used']} of {kept} tracers"
+        for name, values in variants.items()
+        if 0 < values["n_used"] < 0.5 * kept
+    ]
+    if not (empty or thin):
+        return entries
+    for entry in entries.values():
+        if empty:
+            entry["stable"] = None
+            entry["text"] = f"n/a: {' and '.join(empty)} lost every tracer"
+        else:
+            entry["text"] += f" ({'; '.join(thin)})"
+        entry["tracers_lost"] = empty + thin
+    return entries
 
 
 def band_lines(case):

@@ -10,6 +10,9 @@ limits).
 """
 
 import dataclasses
+import math
+
+import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.scene.keys import KEYS_BY_NAME
@@ -153,6 +156,52 @@ def _cameras(tables, where):
     return tuple(cameras)
 
 
+#: Smallest angle (degrees) between two cameras' positions seen from the volume: below it
+#: their lines of sight cross so flatly that the depth of a tracer is not defined (the
+#: depth error grows as 1 / sin of the angle; the presets' pairs are 20° to 60° apart).
+MIN_BASELINE_DEG = 5.0
+
+
+def baseline_angles(cameras):
+    """The angle (degrees) between each pair of cameras, seen from the middle of their
+    look-at points: ``{(name_a, name_b): angle}``."""
+    centre = np.mean([c.look_at_mm for c in cameras], axis=0)
+    rays = [np.asarray(c.position_mm, dtype=np.float64) - centre for c in cameras]
+    angles = {}
+    for i, a in enumerate(cameras):
+        for j in range(i + 1, len(cameras)):
+            norms = np.linalg.norm(rays[i]) * np.linalg.norm(rays[j])
+            cosine = np.dot(rays[i], rays[j]) / norms if norms > 0 else 1.0
+            angles[a.name, cameras[j].name] = math.degrees(math.acos(min(max(cosine, -1), 1)))
+    return angles
+
+
+def check_rig_geometry(cameras, where):
+    """Refuse, before any work, ``[[rig.cameras]]`` tables that cannot triangulate: one
+    camera, or cameras whose widest pair is under :data:`MIN_BASELINE_DEG` apart."""
+    if not cameras:
+        return  # a preset: its geometry is fixed
+    if len(cameras) < 2:
+        raise RimclError(
+            f"rig.cameras in {where}: LPT triangulates from two cameras at least, got one "
+            f"({cameras[0].name}); add a [[rig.cameras]] table (or use a preset, "
+            'rig.preset = "stereo", instead of tables)'
+        )
+    for camera in cameras:
+        if np.allclose(camera.position_mm, camera.look_at_mm):
+            raise RimclError(
+                f"rig.cameras in {where}: camera {camera.name} looks at its own position"
+            )
+    angles = baseline_angles(cameras)
+    pair, widest = max(angles.items(), key=lambda item: item[1])
+    if widest < MIN_BASELINE_DEG:
+        raise RimclError(
+            f"rig.cameras in {where}: the cameras are {widest:.3g}° apart at most "
+            f"({pair[0]}–{pair[1]}, seen from their look-at point); LPT needs a baseline "
+            f"angle of {MIN_BASELINE_DEG:g}° at least to find depth: move them apart"
+        )
+
+
 def lpt_config(scene, where="the scene"):
     """The LPT sections of a checked scene (every key present, ``None`` where the
     pipeline decides), checked together.
@@ -172,8 +221,9 @@ def lpt_config(scene, where="the scene"):
     cameras = _cameras(rig.pop("cameras") or [], where)
     if cameras and rig["preset"]:
         raise RimclError(f"{where}: give rig.preset or [[rig.cameras]], not both")
-    if rig["preset"] == "":
+    if rig["preset"] == "" and not cameras:
         raise RimclError(f'{where}: rig.preset = "" needs [[rig.cameras]] tables')
+    check_rig_geometry(cameras, where)
     rig["preset"] = "" if cameras else rig["preset"] or DEFAULT_PRESET
     illumination = dict(scene["illumination"])
     extent = _length(illumination["extent"], 2, "illumination.extent", where, "two fractions")
