@@ -56,9 +56,9 @@ def test_unknown_and_bad_lpt_keys_are_refused(tmp_path):
     # camera tables without a preset: the study runs them (as rimcl lpt does); with one,
     # the scene is refused
     table = "[[rig.cameras]]\nposition_mm = [700, 50, 50]\nlook_at_mm = [50, 50, 50]\n"
-    path.write_text(table)
+    path.write_text(table + table.replace("[700, 50, 50]", "[700, 400, 50]"))  # two: LPT's least
     rig = StudyConfig.from_scene(load_scene(path)).lpt.rig
-    assert rig.preset == "" and rig.cameras[0].name == "cam1"
+    assert rig.preset == "" and [c.name for c in rig.cameras] == ["cam1", "cam2"]
     assert rig.cameras[0].position_mm == (700.0, 50.0, 50.0)
     assert rig.cameras[0].sensor_pixels == (1920, 1200)
     path.write_text('[rig]\npreset = "stereo"\n' + table)
