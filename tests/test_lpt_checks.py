@@ -94,3 +94,37 @@ def test_finite_rms_is_none_where_nothing_was_measured():
 
     assert finite_rms(np.zeros((5, 0))) is None
     assert finite_rms(np.array([np.nan, 3.0, -4.0, np.nan])) == np.sqrt(12.5)
+
+
+def test_a_dim_two_tracer_run_is_an_n_a_answer(tmp_path, lpt_flow):
+    """Two tracers under cameras too dim for their threshold (100 peak electrons): no
+    candidate pair to match, too few particles to self-calibrate, no tracer kept. It used
+    to crash in matching (after the whole case) or on NaN in the JSON, leaving a case file
+    without lpt_stats.json; now it exits 0 with every number n/a and says why."""
+    import json
+
+    cameras = "".join(
+        f'[[rig.cameras]]\nname = "{name}"\nposition_mm = [700.0, {x2}, 50.0]\n'
+        "look_at_mm = [50.0, 50.0, 50.0]\nfocal_length_mm = 16.0\nf_number = 8.0\n"
+        "sensor_pixels = [320, 200]\n"
+        for name, x2 in (("left", -300.0), ("right", 400.0))
+    )
+    scene = tmp_path / "dim.toml"
+    scene.write_text(
+        f'[field]\npath = "{lpt_flow}"\n[cases]\nnames = ["C3"]\n[tracers]\ncount = 2\n'
+        '[time]\nframes = 5\n[sensor]\npeak_electrons = 100.0\n[run]\nengine = "numpy"\n'
+        "[lpt]\ncalibration_grid = [6, 5]\nmax_rays = 4\n" + cameras
+    )
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["lpt", "run", str(scene), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "n/a: no tracer kept of 2" in result.output and "nan" not in result.output.lower()
+    case = json.loads((out / "lpt_stats.json").read_text(), parse_constant=_no_nan)["cases"]["C3"]
+    assert case["tracers_kept"] == 0 and case["no_tracer"].startswith("no tracer kept of 2")
+    assert case["position"]["x2"]["refraction"]["rms"] is None
+    assert "n/a" in case["self_calibration"]
+    assert sorted(p.name for p in out.iterdir()) == ["lpt_case_C3.h5", "lpt_stats.json"]
+
+
+def _no_nan(constant):
+    raise AssertionError(f"{constant} in lpt_stats.json")

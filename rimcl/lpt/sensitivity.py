@@ -141,7 +141,7 @@ def _tracers_lost(entries, variants, kept):
         for name, values in variants.items()
         if 0 < values["n_used"] < 0.5 * kept
     ]
-    if not (empty or thin):
+    if not (empty or thin) or not kept:  # a case without tracers says so once, itself
         return entries
     for entry in entries.values():
         if empty:
