@@ -178,7 +178,12 @@ def synth(grid, seed, reynolds, frames, dt, gravity, start_time, gradient, sheet
     default=None,
     help="CF/npz data: what the scalar is (default: from its name or standard_name).",
 )
-@click.option("--units", default=None, help="CF/npz data: the scalar's units (K, degC, ...).")
+@click.option(
+    "--units",
+    default=None,
+    help="CF/npz data: the scalar's units, UDUNITS (K, degC, 'kg m-3', g/kg, ...); needed "
+    "where a temperature, salinity or density has no units attribute.",
+)
 @click.option(
     "--velocity", default=None, help="CF/npz data: velocity variables along x,y,z ('u,v,w')."
 )

@@ -78,7 +78,8 @@ def scalar_conversion(quantity, units, name, standard_name=""):
         return float(factor), 0.0
     target = _TARGET[quantity]
     if not unit.is_convertible(target):
-        raise RimclError(f"{name}: units {text!r} are not those of a {quantity}; {hint}")
+        article = "an" if quantity == "index" else "a"
+        raise RimclError(f"{name}: units {text!r} are not those of {article} {quantity}; {hint}")
     offset = float(unit.convert(0.0, target))
     factor = float(unit.convert(1.0, target)) - offset
     if quantity == "density":
