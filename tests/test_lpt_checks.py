@@ -124,6 +124,12 @@ def test_a_dim_two_tracer_run_is_an_n_a_answer(tmp_path, lpt_flow):
     assert case["position"]["x2"]["refraction"]["rms"] is None
     assert "n/a" in case["self_calibration"]
     assert sorted(p.name for p in out.iterdir()) == ["lpt_case_C3.h5", "lpt_stats.json"]
+    # a study draws its figures from it: empty panels, no warning (errors under pytest)
+    from rimcl.lpt.figures import write_lpt_figures
+
+    document = json.loads((out / "lpt_stats.json").read_text())
+    write_lpt_figures(document, tmp_path / "figures")
+    assert any((tmp_path / "figures").iterdir())
 
 
 def _no_nan(constant):

@@ -68,6 +68,12 @@ def _interval(summary, statistic, scale):
     return None if interval is None else [v * scale for v in interval]
 
 
+def _legend(ax):
+    """The legend, where something was drawn (a case that kept no tracer draws nothing)."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=6)
+
+
 def _log_axes(ax, label, ylabel):
     ax.set_xscale("log")
     ax.set_yscale("log")
@@ -102,7 +108,7 @@ def draw_position_error(document):
             )
             data.append({"component": axis, "series": name, **entry})
     _log_axes(ax, label, "rms position error, meas − ref (px)")
-    ax.legend(fontsize=6)
+    _legend(ax)
     panel_title(ax, "a", "3-D position: refraction error per component")
     return figure, {"unit": "px on the focus plane", "series": data}
 
@@ -130,7 +136,7 @@ def draw_kinematic_error(document):
                 )
                 data[quantity].append({"component": axis, "series": name, **entry})
         _log_axes(ax, label, "rms(ε) / rms(truth)")
-        ax.legend(fontsize=6)
+        _legend(ax)
         panel_title(ax, letter, f"{quantity}: refraction error per component")
     return figure, data
 
@@ -165,7 +171,7 @@ def draw_disparity_pdf(document):
     for tolerance in document["scene"]["lpt"]["match_tolerances_px"]:
         ax.axvline(tolerance, color="0.6", lw=0.8)
     _log_axes(ax, "disparity: largest over cameras (px)", "PDF (1/px)")
-    ax.legend(fontsize=6)
+    _legend(ax)
     panel_title(ax, "a", "disparity of the tracers (grey: match tolerances)")
     return figure, {"series": data}
 
@@ -200,7 +206,7 @@ def draw_lost_matches(document):
     ax.set_xlabel(label)
     ax.set_ylabel("fraction of matches lost")
     ax.grid(True, which="major", alpha=0.3)
-    ax.legend(fontsize=6)
+    _legend(ax)
     panel_title(ax, "a", "matches lost: disparity above the tolerance")
     return figure, {"series": data}
 
