@@ -458,7 +458,7 @@ def _read(path, variables, depth_axis, variable, quantity, units, velocity, crop
     wanted = list(range(1, n_frames + 1)) if wanted is None else wanted
     if max(wanted) > n_frames:
         raise RimclError(f"{path} has frames 1..{n_frames}; no frame {max(wanted)}")
-    vel = velocity_variables(variables, scalar.dims, velocity, path)
+    vel = velocity_variables(variables, velocity, path)
     check_import_memory(nodes[::-1], len(wanted), vel is not None, f"importing {path}")
     flip_axes = tuple(spatial.index(d) for d in down)
 

@@ -25,12 +25,13 @@ _VELOCITY_STANDARD = {"x": ("_x_velocity", "eastward_", "x_wind"),
                       "z": ("_z_velocity", "upward_")}  # fmt: skip
 
 
-def velocity_variables(variables, dims, velocity, path):
+def velocity_variables(variables, velocity, path):
     """The velocity variables along ``x, y, z`` (or one with a component axis), or None.
 
     Without ``velocity`` the candidates are found by name and ``standard_name`` among the
-    variables on the scalar's grid (``dims``); two candidates for one component (a flow and
-    a Stokes drift, say) are refused rather than one taken by its place in the file.
+    variables (on any grid: one off the scalar's is refused when read); two candidates for
+    one component (a flow and a Stokes drift, say) are refused rather than one taken by its
+    place in the file.
     """
     if velocity is not None:
         names = [n.strip() for n in str(velocity).split(",")]
@@ -43,14 +44,13 @@ def velocity_variables(variables, dims, velocity, path):
             )
         return dict(zip(("x", "y", "z"), names, strict=True))
     stacked = variables.get("velocity")
-    stacked = stacked if stacked is not None and stacked.dims == (*dims, "component") else None
+    stacked = stacked if stacked is not None and stacked.dims[-1:] == ("component",) else None
     found = {}
     for letter in ("x", "y", "z"):
         for var in variables.values():
             standard = str(var.attrs.get("standard_name", "")).lower()
-            if var.dims == tuple(dims) and (
-                var.name.lower() in _VELOCITY_NAMES[letter]
-                or (standard and any(part in standard for part in _VELOCITY_STANDARD[letter]))
+            if var.name.lower() in _VELOCITY_NAMES[letter] or (
+                standard and any(part in standard for part in _VELOCITY_STANDARD[letter])
             ):
                 found.setdefault(letter, []).append(var.name)
     several = {a: names for a, names in found.items() if len(names) > 1}
