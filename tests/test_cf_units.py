@@ -18,8 +18,8 @@ SHAPE = (3, 4, 5)
 
 def _cf(path, *, time_units="seconds since 2000-01-01", times=(0.0, 1.0), length="mm",
         velocity_units="m s-1", density_units="kg m-3", positive=None, extra=None,
-        w_standard=None):  # fmt: skip
-    """A CF file: density 1000 + depth (kg m-3) on (time, depth, y, x) with coordinates
+        w_standard=None, rho0=1000.0):  # fmt: skip
+    """A CF file: density ``rho0`` + depth (kg m-3) on (time, depth, y, x) with coordinates
     0, 10, 20, ... in ``length``, velocity (1, 2, 3) × 1e-3 in ``velocity_units``; ``extra``
     maps more variable names to (value, attrs) on the same grid."""
     nz, ny, nx = SHAPE
@@ -39,7 +39,7 @@ def _cf(path, *, time_units="seconds since 2000-01-01", times=(0.0, 1.0), length
         dims = ("time", "depth", "y", "x")
         depth = 10.0 * np.arange(nz)[:, None, None]
         rho = f.create_variable("density", dims, "f8")
-        rho[:] = np.broadcast_to(1000.0 + depth, (len(times), *SHAPE))
+        rho[:] = np.broadcast_to(rho0 + depth, (len(times), *SHAPE))
         if density_units is not None:
             rho.attrs["units"] = density_units
         variables = {"u": (1e-3, {}), "v": (2e-3, {}), "w": (3e-3, {}), **(extra or {})}
@@ -101,8 +101,12 @@ def test_a_density_needs_its_units(tmp_path):
     with _import(tmp_path, units="g/l") as ff:
         np.testing.assert_allclose(ff.density(0)[:, 0, 0], [1.0, 1.01, 1.02], rtol=1e-7)
     # "1" (relative to 1000 kg m-3) on values of 1000 cannot be: refused, not n ≈ 335
-    with pytest.raises(RimclError, match=r"density 1000 … 1020 in units '1' is not relative"):
+    with pytest.raises(RimclError, match=r"density 1000 … 1020 × 1000 kg m-3 \(units '1'\) is no"):
         _import(tmp_path, units="1")
+    # an anomaly ρ - ρ0 is no density either
+    _cf(tmp_path / "anomaly.nc", rho0=-10.0)
+    with pytest.raises(RimclError, match=r"density -0.01 … 0.01 × 1000 kg m-3"):
+        _import(tmp_path, units="g/l", name="anomaly.nc")
     with pytest.raises(RimclError, match=r"units 'm s-1' are not those of a density"):
         _import(tmp_path, units="m s-1")
 

@@ -88,12 +88,14 @@ def scalar_conversion(quantity, units, name, standard_name=""):
 
 
 def check_relative_density(values_range, units, name):
-    """Refuse a dimensionless density whose values cannot be ρ / 1000 kg m-3."""
+    """Refuse a density whose stored values (ρ / 1000 kg m-3) are no fluid's: 1000 read in
+    units of 1, or an anomaly ρ - ρ0."""
     lo, hi = values_range
     if not (0.0 < lo and hi < _MAX_RELATIVE_DENSITY):
         raise RimclError(
-            f"{name}: density {lo:g} … {hi:g} in units {units!r} is not relative to "
-            "1000 kg m-3; give its units with --units (e.g. 'kg m-3')"
+            f"{name}: density {lo:g} … {hi:g} × 1000 kg m-3 (units {units!r}) is no fluid's "
+            "density (the wrong units, or an anomaly?); give its units with --units (e.g. "
+            "'kg m-3')"
         )
 
 
