@@ -245,3 +245,22 @@ def test_a_round_off_truth_gives_no_ratio(measured):
         # the velocity's truth is no round-off: its ratios stand
         assert guarded["velocity"][axis]["refraction"]["rms_normalized"] is not None
         assert "ratio_na" not in guarded["velocity"][axis]
+
+
+def test_a_variant_that_kept_few_tracers_is_named_with_its_count(measured):
+    """A variant that keeps 2 of the case's tracers may still land in the interval: the
+    verdict names it with its count (it read "stable (−94 %)" without a word)."""
+    from rimcl.imaging.centroid import TracerFlag
+
+    run, scene, result, stats, kept = measured
+    few = dict(result)
+    flags = np.zeros_like(result["image_flags_meas"])
+    flags[..., 2:] = int(TracerFlag.TOUCHES_EDGE)  # every tracer but the first two lost
+    few["image_flags_meas_threshold_half"] = flags
+    block = threshold_sensitivity(run, few, stats, kept, scene)
+    n_used = block["variants"]["threshold ×½"]["n_used"]
+    assert 0 < n_used <= 2 < 0.5 * stats["tracers_kept"]
+    note = f"threshold ×½ kept {n_used} of {stats['tracers_kept']} tracers"
+    for path, band in block["bands"].items():
+        assert band["text"].endswith(f"({note})"), path
+        assert band["tracers_lost"] == [note]
