@@ -28,22 +28,20 @@ def _title_note(series):
     """What a panel's title says of its marked series: the cases whose value jumps with N
     (the curve is not flat), apart from those a few rows or tracers carry (the curve may
     be flat: the mark is about the sample's tail, not the curve)."""
-    names = {key: name.split(" ")[-1] for key, name, _ in CONVERGENCE_STATISTICS}
+    names = {"rms_normalized": "rms", "random": "std"}
     parts = []
     for label, wanted in (
         ("jumps with N", {"jump"}),
-        ("a few rows or tracers carry", {"few rows", "few tracers", "heavy tail"}),
+        ("a tail carries", {"few rows", "few tracers", "heavy tail"}),
     ):
-        marked = {}
+        marked = {name: [] for name in names.values()}
         for entry in series:
             if wanted & set(entry["reasons"]):
-                marked.setdefault(names[entry["statistic"]], []).append(entry["case"])
-        if marked:
-            parts.append(
-                f"{label}: "
-                + "; ".join(f"{statistic} {', '.join(found)}" for statistic, found in marked.items())
-            )
-    return "".join(f"\n{part}" for part in parts)
+                marked[names[entry["statistic"]]].append(entry["case"])
+        found = [f"{name} {', '.join(cases)}" for name, cases in marked.items() if cases]
+        if found:
+            parts.append(f"{label}: " + " / ".join(found))
+    return "".join(f"; {part}" for part in parts)
 
 
 def draw_convergence(cases):
