@@ -78,7 +78,7 @@ def test_every_headline_has_a_band_with_both_thresholds(measured):
         assert band["not_run"] == []
         assert band["text"].startswith(("stable", "depends on threshold")), band["text"]
     lines = band_lines(stats)
-    assert len(lines) == 3
+    assert len(lines) == 3  # too few tracers to tell a tail: no line of rms ratios it carries
     assert all(line.count("x1 ") == 1 and "n/a" not in line for line in lines)
 
 
@@ -131,6 +131,10 @@ def test_a_variant_that_loses_every_image_is_left_out_of_the_band(measured):
             band["variants"]["threshold ×2"]
             == stats["sensitivity"]["bands"][path]["variants"]["threshold ×2"]
         )
+        # a variant without a tracer leaves no number stable
+        if band["value"]:
+            assert band["stable"] is False
+            assert band["text"] == "depends on threshold ×½: it keeps no tracer"
 
 
 def test_verdict_is_the_ptv_rule_on_lpt_paths():
@@ -151,3 +155,19 @@ def test_verdict_is_the_ptv_rule_on_lpt_paths():
     assert result[paths[0]]["stable"] is False
     assert result[paths[1]]["ci95"] == [0.09, 0.11]
     assert result[paths[1]]["text"] == "stable"
+
+
+def test_rms_ratios_a_tail_carries_are_named():
+    """PTV's rule on LPT: an rms ratio whose largest tracers carry Σε² or whose tail is
+    heavy is named as no headline; a normal one is not."""
+    from rimcl.lpt.sensitivity import tail_lines
+
+    heavy = {"top_share": 0.6, "tail_index": 1.5}
+    normal = {"top_share": 0.05, "tail_index": 8.0}
+    case = {
+        "velocity": {"x1": {"refraction": heavy}, "x2": {"refraction": normal}},
+        "acceleration": {"x3": {"refraction": {"top_share": 0.1, "tail_index": 2.0}}},
+    }
+    (line,) = tail_lines(case)
+    assert line.endswith("velocity x1 (few tracers, heavy tail); acceleration x3 (heavy tail)")
+    assert tail_lines({"velocity": {"x1": {"refraction": normal}}}) == []

@@ -80,7 +80,9 @@ def test_tail_share_and_index_against_known_samples():
     assert summary["tail_index"] == pytest.approx(2.0, rel=0.05)
     assert rms_reasons(summary) == ["few tracers", "heavy tail"]
     # under 100 tracers there is no tail to measure
-    assert error_summary(pareto[:99], np.ones(99), condition=False)["tail_index"] is None
+    small = error_summary(pareto[:99], np.ones(99), condition=False)
+    assert small["tail_index"] is None and small["top_share"] is None
+    assert rms_reasons(small) == []
 
 
 def test_interval_ends_move_little_between_bootstrap_seeds():

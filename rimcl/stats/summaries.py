@@ -90,7 +90,7 @@ def top_share(error, ids):
     Returns
     -------
     share : float or None
-        In ``(0, 1]``; None for an empty sample or one of zero errors.
+        In ``(0, 1]``; None under :data:`TAIL_MIN_TRACERS` tracers or for zero errors.
     tracers : int
         How many tracers the share is of (0 for an empty sample).
     """
@@ -98,7 +98,9 @@ def top_share(error, ids):
     sums = np.sort(np.bincount(tracer.ravel(), weights=np.asarray(error) ** 2))
     count = max(1, math.ceil(TOP_FRACTION * sums.size)) if sums.size else 0
     total = float(np.sum(sums))
-    if not total > 0:
+    # under TAIL_MIN_TRACERS one tracer is more than 1 %, and the largest of a few normal
+    # errors carries a fifth of them by chance: no tail to tell
+    if sums.size < TAIL_MIN_TRACERS or not total > 0:
         return None, count
     return float(np.sum(sums[-count:]) / total), count
 

@@ -326,8 +326,9 @@ def _sensitivity_lines(cases, study):
         "again under: "
         + ", ".join(f"*{name}*" for name in ran)
         + ". **stable**: every one of these inside the 95 % interval (the largest move "
-        "beside it where one moves it by 0.5 % or more); otherwise *depends on X by Y %* "
-        "names the variant that moves it most. *excluded by optics*: the "
+        "beside it where one moves it by 0.5 % or more, and *not run: …* after it where the "
+        "band lacks a measured variant: stable over what ran only); otherwise *depends on "
+        "X by Y %* names the variant that moves it most. *excluded by optics*: the "
         "tracers left out (flagged) counted with their optics error; *threshold ×½* and "
         "*×2*: every tracer located again at that threshold in the same digitised images "
         "(reference and measured; no tracing again), with its own exclusions. ",
@@ -477,9 +478,9 @@ def summary_markdown(stats, study):
         "which every PTV measurement has. The median and the IQR of ε/truth are the "
         "headline: a few tracers cannot carry them. The rms ratio is one only without "
         f"`{NOT_CONVERGED}`: that marks it where it has not converged, where the largest "
-        f"{significant(100 * TOP_FRACTION)} % of the tracers carry more than "
-        f"{significant(100 * TOP_SHARE_LIMIT)} % of Σε² (*few tracers*), or where the "
-        f"errors' tail index is below {significant(TAIL_INDEX_LIMIT)} (*heavy tail*: the "
+        f"{100 * TOP_FRACTION:g} % of the tracers carry more than "
+        f"{100 * TOP_SHARE_LIMIT:g} % of Σε² (*few tracers*), or where the "
+        f"errors' tail index is below {TAIL_INDEX_LIMIT:g} (*heavy tail*: the "
         "rms of a larger sample can lie far outside its interval, which then does not "
         "cover; see Convergence).",
         "",
