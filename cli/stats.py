@@ -48,7 +48,7 @@ def echo_case_lines(stats):
             f"{case['name']:>8}  {g}Δn_max = {number(case['delta_n_max'])}: "
             f"{case['n_used']}/{case['n_tracers']} tracers, |ε_x| peak "
             f"{number(case['position_error_peak_over_L'])} L, rms(ε)/rms(truth): "
-            + ", ".join(parts)
+            + "; ".join(parts)
         )
 
 

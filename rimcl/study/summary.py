@@ -1,8 +1,10 @@
 """The Markdown summary of a study (``summary.md``): headline numbers with their intervals.
 
-The headline is the set of statistics that converge with the number of tracers:
-``rms(ε)/rms(truth)``, the median and interquartile range of ``ε/truth``, and the same over
-the tracers whose truth is not small. The paper's mean and standard deviation of
+The headline is the set of statistics that converge with the number of tracers: the median
+and interquartile range of ``ε/truth``, which a few tracers cannot carry, then
+``rms(ε)/rms(truth)``, marked where it has not converged or a few tracers or a heavy tail
+carry it (:func:`rimcl.stats.convergence.rms_reasons`), and the same over the tracers whose
+truth is not small. The paper's mean and standard deviation of
 ``ε/truth`` follow, labelled as the paper's, with a mark on those that keep growing with
 the number of tracers (:func:`rimcl.stats.convergence.not_converged`). Every value is printed
 with its bootstrap 95 % interval, and a statistic of an empty sample reads ``n/a``.
