@@ -7,8 +7,10 @@ from rimcl.study.summary import number, percent
 
 
 def echo_case_lines(stats):
-    """One line per case: tracers used, position-error peak, and the converging headline
-    rms(ε)/rms(truth) of u3 and a3 (fitted where the tracks allow) with 95 % intervals."""
+    """One line per case: tracers used, position-error peak, and rms(ε)/rms(truth) of u3
+    and a3 (fitted where the tracks allow) with 95 % intervals; one that has not converged
+    (a jump, a few tracers or a heavy tail) is marked † with the median and IQR of
+    ε/truth beside it."""
     for case in stats["cases"]:
         g = "" if case["G"] is None else f"G = {case['G']:.3g}, "
         if case.get("not_resolved"):
@@ -31,12 +33,22 @@ def echo_case_lines(stats):
             shown = percent(summary["rms_normalized"])
             if interval is not None and None not in interval:
                 shown += f" [{percent(interval[0])}, {percent(interval[1])}]"
-            parts.append(f"{component} {shown}" + (" (fit)" if group.endswith("_fit") else ""))
+            shown += " (fit)" if group.endswith("_fit") else ""
+            convergence = case.get("convergence", {})
+            path = f"{group}.{component}.rms_normalized"
+            if path in convergence.get("not_converged", []):
+                # a few tracers or a heavy tail carry it: the robust numbers beside it
+                reasons = ", ".join(convergence.get("reasons", {}).get(path, []))
+                shown += (
+                    f" † not converged ({reasons}); median ε/{component} "
+                    f"{percent(summary['median'])}, IQR {percent(summary['iqr'])}"
+                )
+            parts.append(f"{component} {shown}")
         click.echo(
             f"{case['name']:>8}  {g}Δn_max = {number(case['delta_n_max'])}: "
             f"{case['n_used']}/{case['n_tracers']} tracers, |ε_x| peak "
             f"{number(case['position_error_peak_over_L'])} L, rms(ε)/rms(truth): "
-            + ", ".join(parts)
+            + "; ".join(parts)
         )
 
 

@@ -257,9 +257,19 @@ def test_deflection_figure_marks_the_literature_and_the_incidence_split(study):
     literature = data["panels"]["a"]["literature"]
     assert len(literature) == len(LITERATURE_STUDIES) == 10
     water = next(entry for entry in literature if "water" in entry["flow"])
-    assert water["NL"] == pytest.approx(3.4e-4 / 1.333)
+    # the studies sit at their Δn_max, the axis of the cases: no path length is invented
+    assert water["delta_n_max"] == 3.4e-4 and "NL" not in water
     labels = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
     assert "0 ≤ |θ0| ≤ 0.6" in labels and "0.6 < |θ0|" in labels
+    # (a) each case's deflections at its own Δn_max, with their median (not |N| L, which
+    # is the same path integral as |Δθ|)
+    positive = [case for case in stats["cases"] if case["delta_n_max"] > 0]
+    series = data["panels"]["a"]["series"]
+    assert [entry["delta_n_max"] for entry in series] == [c["delta_n_max"] for c in positive]
+    for entry in series:
+        if entry["deflection"]:
+            assert entry["median"] == pytest.approx(np.median(entry["deflection"]))
+    assert "Δn_max" in figure.axes[1].get_xlabel()
 
 
 def test_maps_show_the_uniform_medium_beside_truth_and_measurements(study):
@@ -428,3 +438,63 @@ def test_dt_sweep_draws_a_quantity_that_some_time_steps_lack(study):
     entry = panels["cases"]["C1"]["acceleration.a3"]
     assert entry["refraction"][2] is None and entry["refraction"][0] is not None
     assert layout_problems(figure) == []
+
+
+def test_position_pdf_counts_the_exact_zeros_it_cannot_draw(tmp_path):
+    """Tracers whose image did not move (|ε_x| = 0, as the paper preset's whole-pixel
+    images give) are counted in the label and the curve carries the others' share."""
+    path = tmp_path / "c1.h5"
+    write_render_file(path, n_tracers=40)
+    with h5py.File(path, "a") as h5:
+        unmoved = h5["tracers/id"][()] < 10
+        for c in ("2", "3"):
+            meas = h5[f"tracers/x{c}_meas"][()]
+            meas[unmoved] = h5[f"tracers/x{c}_ref"][()][unmoved]
+            h5[f"tracers/x{c}_meas"][...] = meas
+    tables = [load_render(path)]
+    figure, data = draw_figure("position_error", tables, compute_stats(tables))
+    entry = data["panels"]["a"]["series"][0]
+    assert entry["n_zero"] == int(np.count_nonzero(unmoved)) > 0
+    assert entry["nonzero_share"] == pytest.approx(1 - entry["n_zero"] / entry["n"])
+    widths = np.diff(np.log10(entry["x_over_L"]))
+    area = np.sum(0.5 * (np.asarray(entry["pdf_log10"][1:]) + entry["pdf_log10"][:-1]) * widths)
+    assert area == pytest.approx(entry["nonzero_share"], rel=0.02)
+    labels = [text.get_text() for text in figure.axes[0].get_legend().get_texts()]
+    assert any(f"{entry['n_zero']} of {entry['n']} exactly 0" in label for label in labels)
+
+
+def test_unconverged_statistics_are_drawn_open_without_bars(study):
+    """The paper's random error of a case marked not converged is an open point without
+    its bar in panel (f); the others keep their bars."""
+    tables, stats, _ = study
+    stats = json.loads(json.dumps(stats))
+    stats["cases"][1]["convergence"]["not_converged"] = []
+    stats["cases"][-1]["convergence"]["not_converged"] = ["velocity.u3.random"]
+    figure, data = draw_figure("velocity_error", tables, stats)
+    u3 = next(s for s in data["panels"]["f"] if s["label"] == "u3: std(ε/u3)")
+    assert u3["not_converged"] == [False, True]  # C1, C4
+    ax = figure.axes[5]  # panel (f)
+    open_points = [
+        line
+        for line in ax.get_lines()
+        if line.get_markerfacecolor() == "white" and len(line.get_xdata()) == 1
+    ]
+    assert [list(line.get_ydata()) for line in open_points] == [[abs(u3["value"][1])]]
+    labels = [text.get_text() for text in ax.get_legend().get_texts()]
+    assert "not converged (no interval)" in labels
+
+
+def test_convergence_titles_name_jumps_apart_from_tails(study):
+    """A flat curve that a tail carries is not titled as jumping with N."""
+    tables, stats, _ = study
+    stats = json.loads(json.dumps(stats))
+    air, water = stats["cases"][1], stats["cases"][2]
+    air["convergence"]["not_converged"] = ["velocity.u3.random"]
+    air["convergence"]["reasons"] = {"velocity.u3.random": ["few rows"]}
+    water["convergence"]["not_converged"] = ["velocity.u3.rms_normalized"]
+    water["convergence"]["reasons"] = {"velocity.u3.rms_normalized": ["jump", "heavy tail"]}
+    figure, _ = draw_figure("convergence", tables, stats)
+    title = " ".join(figure.axes[0].get_title("left").split())
+    jumps = title.split("jumps with N:")[1].split(";")[0]
+    assert "rms C4" in jumps and "C1" not in jumps
+    assert "a tail carries: rms C4 / std C1" in title

@@ -78,7 +78,7 @@ def test_every_headline_has_a_band_with_both_thresholds(measured):
         assert band["not_run"] == []
         assert band["text"].startswith(("stable", "depends on threshold")), band["text"]
     lines = band_lines(stats)
-    assert len(lines) == 3
+    assert len(lines) == 3  # too few tracers to tell a tail: no line of rms ratios it carries
     assert all(line.count("x1 ") == 1 and "n/a" not in line for line in lines)
 
 
@@ -264,3 +264,19 @@ def test_a_variant_that_kept_few_tracers_is_named_with_its_count(measured):
     for path, band in block["bands"].items():
         assert band["text"].endswith(f"({note})"), path
         assert band["tracers_lost"] == [note]
+
+
+def test_rms_ratios_a_tail_carries_are_named():
+    """PTV's rule on LPT: an rms ratio whose largest tracers carry Σε² or whose tail is
+    heavy is named as no headline; a normal one is not."""
+    from rimcl.lpt.sensitivity import tail_lines
+
+    heavy = {"top_share": 0.6, "tail_index": 1.5}
+    normal = {"top_share": 0.05, "tail_index": 8.0}
+    case = {
+        "velocity": {"x1": {"refraction": heavy}, "x2": {"refraction": normal}},
+        "acceleration": {"x3": {"refraction": {"top_share": 0.1, "tail_index": 2.0}}},
+    }
+    (line,) = tail_lines(case)
+    assert line.endswith("velocity x1 (few tracers, heavy tail); acceleration x3 (heavy tail)")
+    assert tail_lines({"velocity": {"x1": {"refraction": normal}}}) == []

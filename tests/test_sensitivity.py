@@ -51,9 +51,10 @@ def test_a_band_reads_stable_inside_the_interval_and_names_the_largest_move():
     case = {"velocity": {"u3": {"rms_normalized": 0.32, "ci95": {"rms_normalized": [0.28, 0.36]}}}}
     path = "velocity.u3.rms_normalized"
     inside = bands(case, {"threshold ×½": {path: 0.30}, "rays ×4": {path: 0.35}})[path]
-    # stable against what ran; the measured variants that did not run are named
-    # inside the interval: stable, with the largest move beside it
-    assert inside["stable"] and inside["text"] == "stable (rays ×4: +9 %)"
+    # stable against what ran; the measured variants that did not run are named in the
+    # verdict: inside the interval, stable, with the largest move beside it
+    assert inside["stable"]
+    assert inside["text"] == "stable (rays ×4: +9 %); not run: the other interpolation"
     assert inside["not_run"] == ["the other interpolation"]
     every = {name: {path: 0.32} for name in (*FILE_VARIANTS, *MEASURED_VARIANTS)}
     assert bands(case, every)[path]["text"] == "stable"
@@ -63,6 +64,20 @@ def test_a_band_reads_stable_inside_the_interval_and_names_the_largest_move():
     assert not moved["stable"]
     assert moved["text"] == "depends on threshold ×½ by -54 %"
     assert bands(case, {})[path]["text"] == "n/a"
+
+
+def test_a_variant_that_keeps_no_tracer_is_never_stable():
+    """A threshold that loses every tracer has no number: the band says so instead of
+    reading stable over the variants that kept some."""
+    case = {"velocity": {"u3": {"rms_normalized": 0.32, "ci95": {"rms_normalized": [0.1, 0.9]}}}}
+    path = "velocity.u3.rms_normalized"
+    variants = {
+        "threshold ×½": {path: 0.31, "n_used": 40},
+        "threshold ×2": {path: None, "n_used": 0},
+    }
+    band = bands(case, variants, measured=())[path]
+    assert band["stable"] is False
+    assert band["text"] == "depends on threshold ×2: it keeps no tracer"
 
 
 def test_variant_scenes_change_one_setting():
@@ -149,8 +164,11 @@ def test_every_case_carries_its_threshold_band_from_its_own_file(tmp_path):
     assert variants["threshold ×2"][u3] == pytest.approx(expected)
     band = case["sensitivity"]["bands"][u3]
     assert band["text"].startswith("depends on threshold ×2 by +")
-    # positions did not move at either threshold: stable
-    assert case["sensitivity"]["bands"]["position_error_median_over_L"]["text"] == "stable"
+    # positions did not move at either threshold: stable, over what ran
+    assert (
+        case["sensitivity"]["bands"]["position_error_median_over_L"]["text"]
+        == "stable; not run: the other interpolation, rays ×4"
+    )
     assert band["not_run"] == list(MEASURED_VARIANTS)
 
 

@@ -237,3 +237,26 @@ def test_missing_and_non_hdf5_inputs(tmp_path):
     text.write_text("not hdf5")
     with pytest.raises(RimclError, match="not a readable HDF5 file"):
         load_render(text)
+
+
+def test_the_command_line_marks_an_rms_that_has_not_converged(tmp_path, capsys):
+    """The printed rms of a case whose tail carries it reads † with why, and the median and
+    IQR of ε/truth beside it; an rms that converged reads plain."""
+    from rimcl.cli.stats import echo_case_lines
+    from rimcl.study.summary import percent
+
+    path = tmp_path / "c4.h5"
+    write_render_file(path, case="C4", k_rho=0.334, n_tracers=40)
+    case = case_statistics(load_render(path))
+    case["convergence"]["not_converged"] = ["velocity.u3.rms_normalized"]
+    case["convergence"]["reasons"] = {"velocity.u3.rms_normalized": ["few tracers", "heavy tail"]}
+    u3 = case["velocity"]["u3"]
+    echo_case_lines({"cases": [case]})
+    line = capsys.readouterr().out
+    assert (
+        f"† not converged (few tracers, heavy tail); median ε/u3 {percent(u3['median'])}, "
+        f"IQR {percent(u3['iqr'])}"
+    ) in line
+    case["convergence"]["not_converged"] = []
+    echo_case_lines({"cases": [case]})
+    assert "†" not in capsys.readouterr().out

@@ -76,6 +76,29 @@ def test_a_growing_statistic_is_marked(tmp_path, scene):
     ) in paper_row
 
 
+def test_the_headline_leads_with_the_median_and_marks_an_rms_a_tail_carries(tmp_path, scene):
+    """The median and IQR of ε/truth come first; an rms ratio whose largest tracers carry
+    Σε² or whose tail is heavy reads † with why, beside the same number unmarked."""
+    path = tmp_path / "c4.h5"
+    write_render_file(path, case="C4", k_rho=0.334, n_tracers=40)
+    stats = compute_stats([load_render(path)])
+    case = stats["cases"][0]
+    u3 = case["velocity"]["u3"]
+    u3["top_share"], u3["top_tracers"], u3["tail_index"] = 0.83, 3, 1.2
+    case["convergence"]["not_converged"] = ["velocity.u3.rms_normalized"]
+    case["convergence"]["reasons"] = {"velocity.u3.rms_normalized": ["few tracers", "heavy tail"]}
+    text = summary_markdown(stats, scene)
+    row = table_rows(text, "C4")[1]  # position table first, then u3
+    median = with_interval(u3["median"], u3["ci95"]["median"], 100, " %")
+    rms = with_interval(u3["rms_normalized"], u3["ci95"]["rms_normalized"], 100, " %")
+    assert row[1] == median
+    assert row[3] == f"{rms} † (3 tracers carry 83 % of Σε²; tail index 1.2)"
+    # a3 is not marked: its rms reads plain
+    a3 = case["acceleration"]["a3"]
+    a3_row = table_rows(text, "C4")[2]
+    assert a3_row[3] == with_interval(a3["rms_normalized"], a3["ci95"]["rms_normalized"], 100, " %")
+
+
 def test_the_paper_table_gives_both_error_definitions(tmp_path, scene):
     path = tmp_path / "c1.h5"
     write_render_file(path, n_tracers=40)

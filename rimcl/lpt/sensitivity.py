@@ -19,6 +19,7 @@ import numpy as np
 
 from rimcl.lpt.images import unusable
 from rimcl.lpt.units import COMPONENTS
+from rimcl.stats.convergence import rms_reasons
 from rimcl.stats.sensitivity import THRESHOLD_NAMES, bands
 
 #: The headline numbers per group, dotted paths into a case of ``lpt_stats.json`` (``{}`` the
@@ -153,11 +154,31 @@ def _tracers_lost(entries, variants, kept):
     return entries
 
 
+def tail_lines(case):
+    """The summary's line naming the rms ratios of a case that a tail carries (PTV's rule,
+    :func:`rimcl.stats.convergence.rms_reasons`): they are no headline, their median and
+    IQR are."""
+    marked = []
+    for group in ("velocity", "acceleration"):
+        for name in COMPONENTS:
+            summary = ((case.get(group) or {}).get(name) or {}).get("refraction")
+            reasons = rms_reasons(summary) if summary else []
+            if reasons:
+                marked.append(f"{group} {name} ({', '.join(reasons)})")
+    if not marked:
+        return []
+    return [
+        "  † rms(ε)/rms(truth) that a tail carries (its interval cannot cover a larger "
+        "sample; read the median and IQR of ε/truth in lpt_stats.json): " + "; ".join(marked)
+    ]
+
+
 def band_lines(case):
-    """The summary's lines of a case's threshold band: per headline number its verdict."""
+    """The summary's lines of a case's threshold band: per headline number its verdict,
+    and the rms ratios a tail carries (:func:`tail_lines`)."""
     block = case.get("sensitivity")
     if not block:
-        return []
+        return tail_lines(case)
     bands_of = block["bands"]
     return [
         f"  threshold ×½/×2 band, {group}: "
@@ -166,4 +187,4 @@ def band_lines(case):
             for name in COMPONENTS
         )
         for group, path in PATHS.items()
-    ]
+    ] + tail_lines(case)

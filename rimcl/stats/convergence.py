@@ -2,15 +2,23 @@
 
 The refraction errors of a case are recomputed on nested random subsamples of its tracers
 (``N/16 ... N``); :func:`not_converged` names the statistics whose full-sample value jumps
-away from the smaller samples', and :func:`carried_by_few` the ratio statistics that a few
-rows carry.
+away from the smaller samples', :func:`carried_by_few` the ratio statistics that a few
+rows carry, and :func:`rms_reasons` the rms ratios that a few tracers or a heavy tail carry
+(their intervals cannot cover the value of a larger sample).
 """
 
 import numpy as np
 
 from rimcl.stats.bootstrap import TracerBootstrap
 from rimcl.stats.error_blocks import refraction_errors
-from rimcl.stats.summaries import INFLUENCE_LIMIT, INFLUENCE_ROWS, SUMMARY_KEYS
+from rimcl.stats.summaries import (
+    INFLUENCE_LIMIT,
+    INFLUENCE_ROWS,
+    SUMMARY_KEYS,
+    TAIL_INDEX_LIMIT,
+    TOP_FRACTION,
+    TOP_SHARE_LIMIT,
+)
 from rimcl.stats.tables import rows_of
 
 #: Nested subsamples of the convergence check: N / d tracers for each divisor d.
@@ -68,6 +76,38 @@ def carried_by_few(summary):
     return share is not None and share > INFLUENCE_LIMIT
 
 
+def rms_reasons(summary):
+    """Why an rms ratio cannot be a headline, from its summary's tail (empty: it can).
+
+    ``"few tracers"``: the :data:`TOP_FRACTION` of tracers of largest errors carry more
+    than :data:`TOP_SHARE_LIMIT` of ``Σ ε²``; ``"heavy tail"``: the errors' tail index
+    is below :data:`TAIL_INDEX_LIMIT` (the rms's own spread is infinite, so its bootstrap
+    interval under-covers even where the sample happens to hold no extreme tracer).
+    """
+    share, index = summary.get("top_share"), summary.get("tail_index")
+    return [
+        reason
+        for reason, marked in (
+            ("few tracers", share is not None and share > TOP_SHARE_LIMIT),
+            ("heavy tail", index is not None and index < TAIL_INDEX_LIMIT),
+        )
+        if marked
+    ]
+
+
+def _tails(errors, blocks):
+    """``{path: reasons}`` of the rms ratios of the full sample (:func:`rms_reasons`)."""
+    reasons = {}
+    for group, (symbol, _) in blocks.items():
+        for component in (f"{symbol}2", f"{symbol}3", "magnitude"):
+            summary = errors[group][component]
+            for prefix, part in (("", summary), ("conditioned_", summary["conditioned"])):
+                found = rms_reasons(part)
+                if found:
+                    reasons[(group, component, prefix + "rms_normalized")] = found
+    return reasons
+
+
 def _influences(errors, blocks):
     """``{path: influence}`` of the ratio statistics of the full sample."""
     shares = {}
@@ -103,7 +143,9 @@ def convergence(tables, kept, blocks, full):
         (``velocity.u3.random``) of the statistics :func:`not_converged` or
         :func:`carried_by_few` marks; ``reasons``: for each of them, why (``"jump"``: the
         value at N outside the N/4 or N/2 interval; ``"few rows"``: the largest
-        ``influence_rows`` rows carry more than ``influence_limit`` of ``Σ (ε/truth)²``).
+        ``influence_rows`` rows carry more than ``influence_limit`` of ``Σ (ε/truth)²``;
+        for the rms ratios ``"few tracers"`` and ``"heavy tail"``, :func:`rms_reasons`).
+        ``top_fraction``, ``top_share_limit``, ``tail_index_limit``: the limits of these.
     """
     order = np.random.default_rng(CONVERGENCE_SEED).permutation(kept)
     sizes = sorted({kept.size // d for d in CONVERGENCE_DIVISORS if kept.size // d >= 2})
@@ -123,10 +165,14 @@ def convergence(tables, kept, blocks, full):
         "seed": CONVERGENCE_SEED,
         "influence_rows": INFLUENCE_ROWS,
         "influence_limit": INFLUENCE_LIMIT,
+        "top_fraction": TOP_FRACTION,
+        "top_share_limit": TOP_SHARE_LIMIT,
+        "tail_index_limit": TAIL_INDEX_LIMIT,
         "not_converged": [],
         "reasons": {},
     }
     few = {path for path, part in _influences(full, blocks).items() if carried_by_few(part)}
+    tails = _tails(full, blocks)
     for path in levels[0] if levels else ():
         values = [level[path][0] for level in levels]
         intervals = [level[path][1] for level in levels]
@@ -141,7 +187,7 @@ def convergence(tables, kept, blocks, full):
                 ("few rows", path in few),
             )
             if marked
-        ]
+        ] + tails.get(path, [])
         if reasons:
             result["not_converged"].append(".".join(path))
             result["reasons"][".".join(path)] = reasons

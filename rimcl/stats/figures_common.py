@@ -252,19 +252,23 @@ def errorbars(ax, xs, values, intervals, absolute, **style):
 
 
 def statistic_against_g(
-    ax, cases, series_specs, statistic, absolute=False, dodge=0.06, legend=True
+    ax, cases, series_specs, statistic, absolute=False, dodge=0.06, legend=True, marks=None
 ):
     """Statistics against G with 95 % error bars, one line per series; returns the data.
 
     ``series_specs`` lists ``(label, getter, style)``; ``getter(case)`` gives the summary
     dict (with ``ci95``) or ``None``. Series are shifted a little along G (log axis) so
     their bars do not hide each other. Without ``legend`` the labelled handles are still
-    made (a figure legend can collect them).
+    made (a figure legend can collect them). ``marks``, one per series, lists functions
+    ``mark(case)`` that say whether the case's value has not converged: such a point is
+    drawn open and without its bar (an interval that does not cover), and listed in the
+    data's ``not_converged``.
     """
-    data, any_zero = [], False
+    data, any_zero, any_marked = [], False, False
     offsets = (np.arange(len(series_specs)) - (len(series_specs) - 1) / 2) * dodge
-    for (label, getter, style), offset in zip(series_specs, offsets, strict=True):
-        g_values, values, intervals = [], [], []
+    marks = marks or [None] * len(series_specs)
+    for (label, getter, style), offset, mark in zip(series_specs, offsets, marks, strict=True):
+        g_values, values, intervals, flagged = [], [], [], []
         for case in cases:
             summary = getter(case)
             value = None if summary is None else summary[statistic]
@@ -272,21 +276,49 @@ def statistic_against_g(
                 g_values.append(case["G"])
                 values.append(value)
                 intervals.append(summary["ci95"][statistic])
+                flagged.append(bool(mark is not None and mark(case)))
         shift = 10.0**offset
         xs = [g * shift for g in g_values]
         shown = [abs(v) if absolute else v for v in values]
         line = ax.plot(xs, shown, "-", lw=1, **{k: v for k, v in style.items() if k != "marker"})
         color = line[0].get_color()
         marker_style = {"color": color, "marker": style.get("marker", "o"), "ms": 4}
-        any_zero |= errorbars(ax, xs, values, intervals, absolute, **marker_style)
+        kept = [i for i, f in enumerate(flagged) if not f]
+        any_zero |= errorbars(
+            ax,
+            [xs[i] for i in kept],
+            [values[i] for i in kept],
+            [intervals[i] for i in kept],
+            absolute,
+            **marker_style,
+        )
+        if len(kept) < len(flagged):
+            any_marked = True
+            ax.plot(
+                [x for x, f in zip(xs, flagged, strict=True) if f],
+                [v for v, f in zip(shown, flagged, strict=True) if f],
+                linestyle="none",
+                mfc="white",
+                **marker_style,
+            )
         ax.plot([], [], "-" + style.get("marker", "o"), color=color, ms=4, label=label)
-        data.append({"label": label, "G": g_values, "value": values, "ci95": intervals})
+        data.append(
+            {
+                "label": label,
+                "G": g_values,
+                "value": values,
+                "ci95": intervals,
+                "not_converged": flagged,
+            }
+        )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel(G_LABEL)
     ax.grid(True, which="major", alpha=0.3)
     if any_zero:
         ax.plot([], [], "v", mfc="white", color="k", ms=4, label="95 % interval holds 0")
+    if any_marked:
+        ax.plot([], [], "o", mfc="white", color="k", ms=4, label="not converged (no interval)")
     if legend:
         ax.legend(fontsize=6)
     return data

@@ -24,6 +24,26 @@ CONVERGENCE_STATISTICS = (
 )
 
 
+def _title_note(series):
+    """What a panel's title says of its marked series: the cases whose value jumps with N
+    (the curve is not flat), apart from those a few rows or tracers carry (the curve may
+    be flat: the mark is about the sample's tail, not the curve)."""
+    names = {"rms_normalized": "rms", "random": "std"}
+    parts = []
+    for label, wanted in (
+        ("jumps with N", {"jump"}),
+        ("a tail carries", {"few rows", "few tracers", "heavy tail"}),
+    ):
+        marked = {name: [] for name in names.values()}
+        for entry in series:
+            if wanted & set(entry["reasons"]):
+                marked[names[entry["statistic"]]].append(entry["case"])
+        found = [f"{name} {', '.join(cases)}" for name, cases in marked.items() if cases]
+        if found:
+            parts.append(f"{label}: " + " / ".join(found))
+    return "".join(f"; {part}" for part in parts)
+
+
 def draw_convergence(cases):
     """One compact panel per quantity: each statistic over the nested subsamples, divided
     by its value at N, so that a converged statistic is a flat line at 1 and a jump of the
@@ -47,7 +67,9 @@ def draw_convergence(cases):
                 if entry is None or not entry["value"] or not entry["value"][-1]:
                     continue
                 full = entry["value"][-1]
-                flagged = f"{group}.{component}.{statistic}" in convergence["not_converged"]
+                path = f"{group}.{component}.{statistic}"
+                flagged = path in convergence["not_converged"]
+                reasons = convergence.get("reasons", {}).get(path, [])
                 points = [
                     (n, v / full, None if ci is None else [ci[0] / full, ci[1] / full], ci)
                     for n, v, ci in zip(
@@ -79,6 +101,7 @@ def draw_convergence(cases):
                         "ci95": list(original),
                         "relative_to_n": list(ratios),
                         "not_converged": flagged,
+                        "reasons": reasons,
                     }
                 )
         ax.axhline(1.0, color="0.5", lw=0.8)
@@ -89,8 +112,7 @@ def draw_convergence(cases):
         ax.set_ylabel(f"value / value at N, {component}")
         ax.grid(True, which="major", alpha=0.3)
         letter = next(letters)
-        flagged = list(dict.fromkeys(s["case"] for s in series if s["not_converged"]))
-        note = f"; not converged: {', '.join(flagged)}" if flagged else ""
+        note = _title_note(series)
         panel_title(ax, letter, f"{component}, {descriptions[group]}{note}", fontsize=8)
         panels[letter] = {"group": group, "series": series}
     for ax in list(axes.flat)[len(groups) :]:
@@ -114,8 +136,8 @@ def draw_convergence(cases):
         figure,
         "Convergence with the number of tracers: each statistic over nested subsamples "
         "divided by its value at N (1: converged; open markers: not converged, by a jump "
-        "out of the N/4 or N/2 interval or a few rows carrying it); bars: bootstrap 95 % "
-        "intervals",
+        "out of the N/4 or N/2 interval, or a few rows or tracers or a heavy tail carrying "
+        "it, which a flat curve can hide); bars: bootstrap 95 % intervals",
         fontsize=9,
     )
     return figure, {"panels": panels}

@@ -38,12 +38,18 @@ def draw_position_error(all_tables, cases):
     for tables, case, color in zip(all_tables, cases, colors, strict=True):
         errors = position_errors(kept_rows(tables, tables.tracers), tables.length)
         grid, density = density_estimate(errors, log=True)
+        zeros = int(np.count_nonzero(errors == 0))
+        # a log axis has no place for |ε_x| = 0 (an image that did not move): the curve is
+        # the density of the others times their share, and the label counts the zeros
+        share = 1.0 - zeros / errors.size if errors.size else 1.0
+        density = density * share
         entry = {
             "label": case_label(case),
             "x_over_L": grid.tolist(),
             "pdf_log10": density.tolist(),
+            "nonzero_share": share,
             "peak_over_L": case["position_error_peak_over_L"],
-            "n_zero": int(np.count_nonzero(errors == 0)),
+            "n_zero": zeros,
             "n": int(errors.size),
         }
         series.append(entry)
@@ -53,7 +59,8 @@ def draw_position_error(all_tables, cases):
                 note = ": |ε_x| = 0 exactly"
             ax_pdf.plot([], [], color=color, label=case_label(case) + note)
             continue
-        ax_pdf.plot(grid, density, color=color, label=case_label(case))
+        zero_note = f" ({zeros} of {errors.size} exactly 0, off the axis)" if zeros else ""
+        ax_pdf.plot(grid, density, color=color, label=case_label(case) + zero_note)
         # every competing mode (one where the PDF has a single peak)
         modes = case.get("position_error_modes_over_L") or [entry["peak_over_L"]]
         entry["modes_over_L"] = modes
@@ -62,7 +69,7 @@ def draw_position_error(all_tables, cases):
             ax_pdf.plot(mode, height, "o", color=color, mec="k")
     ax_pdf.set_xscale("log")
     ax_pdf.set_xlabel("position error |ε_x| / L")
-    ax_pdf.set_ylabel("PDF of log10(|ε_x| / L)")
+    ax_pdf.set_ylabel("PDF of log10(|ε_x| / L) (× share of |ε_x| > 0)")
     ax_pdf.grid(True, which="major", alpha=0.3)
     ax_pdf.legend(fontsize=6, title="dots: PDF peaks (two: two modes)", title_fontsize=6)
     # µm per L where the scene gives the field's size (field.length_m); every case one field
@@ -187,24 +194,30 @@ def _kinematic_error(all_tables, cases, group, title):
     def name(key):
         return f"|{symbol}|" if key == "magnitude" else key
 
+    def marks(statistic):
+        """Per component: whether a case's statistic has not converged (drawn open, no bar)."""
+        return [_not_converged(f"{group}.{key}.{statistic}") for key, _ in components]
+
     panels["e"] = statistic_against_g(
         axes[1, 0],
         cases,
         [(f"{name(k)}: |mean(ε/{name(k)})|", summary_of(k), {"marker": m}) for k, m in components],
         "systematic",
         absolute=True,
+        marks=marks("systematic"),
     )
     axes[1, 0].set_ylabel("|systematic error| = |mean(ε/truth)|")
-    panel_title(axes[1, 0], "e", "the paper's systematic error")
+    panel_title(axes[1, 0], "e", "the paper's systematic error (open: not converged)")
     panels["f"] = statistic_against_g(
         axes[1, 1],
         cases,
         [(f"{name(k)}: std(ε/{name(k)})", summary_of(k), {"marker": m}) for k, m in components],
         "random",
         absolute=True,
+        marks=marks("random"),
     )
     axes[1, 1].set_ylabel("random error = std(ε/truth)")
-    panel_title(axes[1, 1], "f", "the paper's random error (may not converge)")
+    panel_title(axes[1, 1], "f", "the paper's random error (open: not converged)")
     panels["g"] = statistic_against_g(
         axes[1, 2],
         cases,
@@ -214,9 +227,10 @@ def _kinematic_error(all_tables, cases, group, title):
         ],
         "rms_normalized",
         absolute=True,
+        marks=marks("rms_normalized"),
     )
     axes[1, 2].set_ylabel("rms(ε) / rms(truth)")
-    panel_title(axes[1, 2], "g", "robust: rms(ε) / rms(truth)")
+    panel_title(axes[1, 2], "g", "rms(ε) / rms(truth) (open: a tail carries it)")
     key = f"{symbol}3"
     panels["h"] = statistic_against_g(
         axes[1, 3],
@@ -248,8 +262,17 @@ def _kinematic_error(all_tables, cases, group, title):
         for case, color in zip(cases, colors, strict=True)
     ]
     figure.legend(handles=handles, loc="outside right upper", fontsize=7, title="(a)–(d)")
-    figure_title(figure, title + " (bars: bootstrap 95 % intervals)", fontsize=11)
+    figure_title(
+        figure,
+        title + " (bars: bootstrap 95 % intervals; open markers without bars: not converged)",
+        fontsize=11,
+    )
     return figure, {"panels": panels}
+
+
+def _not_converged(path):
+    """``mark(case)``: whether ``path`` is among the case's not-converged statistics."""
+    return lambda case: path in case.get("convergence", {}).get("not_converged", [])
 
 
 def _with_statistic(getter, statistic):

@@ -180,11 +180,12 @@ def bands(case, variants, paths=None, measured=MEASURED_VARIANTS):
     dict of str to dict
         Per headline path: ``value``, ``ci95``, ``variants`` (``{name: value}``),
         ``relative`` (``{name: value / headline - 1}``), ``stable`` (every variant inside
-        the interval; None without variants or value), ``not_run`` (the
-        :data:`MEASURED_VARIANTS` not measured: the band does not include them) and
-        ``text`` ("stable" where no variant moves it by :data:`STILL_PERCENT`; "stable
-        (X: +Y %)" naming the largest move inside the interval; "depends on X by +Y %";
-        or "n/a").
+        the interval; None without variants or value; False where a variant keeps no
+        tracer), ``not_run`` (the :data:`MEASURED_VARIANTS` not measured: the band does
+        not include them) and ``text`` ("stable" where no variant moves it by
+        :data:`STILL_PERCENT`; "stable (X: +Y %)" naming the largest move inside the
+        interval; either followed by "; not run: …" naming ``not_run``; "depends on X by
+        +Y %"; "depends on X: it keeps no tracer"; or "n/a").
     """
     result = {}
     for path in [path for path, _, _ in HEADLINES] if paths is None else paths:
@@ -193,6 +194,12 @@ def bands(case, variants, paths=None, measured=MEASURED_VARIANTS):
         found = {name: v for name, v in found.items() if v is not None}
         entry = {"value": value, "ci95": interval, "variants": found, "relative": {}}
         entry["not_run"] = [name for name in measured if name not in variants]
+        # a variant that keeps no tracer has no number, and cannot leave it stable
+        empty = [name for name, values in variants.items() if values.get("n_used") == 0]
+        if value is not None and value and empty:
+            entry.update(stable=False, text=f"depends on {empty[0]}: it keeps no tracer")
+            result[path] = entry
+            continue
         if value is None or not value or not found:
             entry.update(stable=None, text="n/a")
             result[path] = entry
@@ -206,9 +213,13 @@ def bands(case, variants, paths=None, measured=MEASURED_VARIANTS):
         move = 100 * entry["relative"][name]
         if not inside:
             entry["text"] = f"depends on {name} by {move:+.0f} %"
-        elif abs(move) < STILL_PERCENT:
-            entry["text"] = "stable"
-        else:  # inside the interval, but how far the settings move it still shows
-            entry["text"] = f"stable ({name}: {move:+.0f} %)"
+        else:
+            # inside the interval, but how far the settings move it still shows, and a
+            # band without the measured variants is stable only over what ran
+            entry["text"] = (
+                "stable" if abs(move) < STILL_PERCENT else f"stable ({name}: {move:+.0f} %)"
+            )
+            if entry["not_run"]:
+                entry["text"] += f"; not run: {', '.join(entry['not_run'])}"
         result[path] = entry
     return result

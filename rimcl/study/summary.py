@@ -1,8 +1,10 @@
 """The Markdown summary of a study (``summary.md``): headline numbers with their intervals.
 
-The headline is the set of statistics that converge with the number of tracers:
-``rms(ε)/rms(truth)``, the median and interquartile range of ``ε/truth``, and the same over
-the tracers whose truth is not small. The paper's mean and standard deviation of
+The headline is the set of statistics that converge with the number of tracers: the median
+and interquartile range of ``ε/truth``, which a few tracers cannot carry, then
+``rms(ε)/rms(truth)``, marked where it has not converged or a few tracers or a heavy tail
+carry it (:func:`rimcl.stats.convergence.rms_reasons`), and the same over the tracers whose
+truth is not small. The paper's mean and standard deviation of
 ``ε/truth`` follow, labelled as the paper's, with a mark on those that keep growing with
 the number of tracers (:func:`rimcl.stats.convergence.not_converged`). Every value is printed
 with its bootstrap 95 % interval, and a statistic of an empty sample reads ``n/a``.
@@ -14,7 +16,12 @@ from datetime import datetime, timezone
 from rimcl import __version__
 from rimcl.piv.comparison import COMPARED
 from rimcl.stats.sensitivity import FILE_VARIANTS, MEASURED_VARIANTS, THRESHOLD_NAMES
-from rimcl.stats.summaries import INFLUENCE_LIMIT
+from rimcl.stats.summaries import (
+    INFLUENCE_LIMIT,
+    TAIL_INDEX_LIMIT,
+    TOP_FRACTION,
+    TOP_SHARE_LIMIT,
+)
 from rimcl.study.answer import answer_lines, lens_lines, scene_warnings, warning_lines
 
 PAPER_SOURCE = (
@@ -170,6 +177,23 @@ def _peak_cell(case):
     return text
 
 
+def _rms_cell(case, path, summary):
+    """The rms ratio with its mark and, where it is marked, why: the share of Σε² its
+    largest tracers carry and the errors' tail index (:func:`rms_reasons`)."""
+    text = _marked(case, path, _percent_of(summary, "rms_normalized"))
+    reasons = case.get("convergence", {}).get("reasons", {}).get(path, [])
+    extras = []
+    if "few tracers" in reasons:
+        count = summary["top_tracers"]
+        extras.append(
+            f"{count} tracer{'s' if count > 1 else ''} carry "
+            f"{significant(100 * summary['top_share'], 2)} % of Σε²"
+        )
+    if "heavy tail" in reasons:
+        extras.append(f"tail index {significant(summary['tail_index'], 2)}")
+    return f"{text} ({'; '.join(extras)})" if extras else text
+
+
 def _headline_rows(cases, group, component):
     rows = []
     for case in cases:
@@ -180,16 +204,12 @@ def _headline_rows(cases, group, component):
         rows.append(
             [
                 case["name"],
-                _marked(case, f"{path}.rms_normalized", _percent_of(summary, "rms_normalized")),
                 _marked(case, f"{path}.median", _percent_of(summary, "median")),
                 _marked(case, f"{path}.iqr", _percent_of(summary, "iqr")),
-                _marked(
-                    case,
-                    f"{path}.conditioned_rms_normalized",
-                    _percent_of(conditioned, "rms_normalized"),
-                ),
+                _rms_cell(case, f"{path}.rms_normalized", summary),
                 _marked(case, f"{path}.conditioned_median", _percent_of(conditioned, "median")),
                 _marked(case, f"{path}.conditioned_iqr", _percent_of(conditioned, "iqr")),
+                _rms_cell(case, f"{path}.conditioned_rms_normalized", conditioned),
                 f"{conditioned['n']}/{summary['n']}",
                 _percent_of(baseline, "rms_normalized"),
             ]
@@ -250,7 +270,8 @@ def _convergence_lines(cases):
         "tracers N: its value at N lies outside the 95 % interval at N/4 or at N/2 (nested "
         "random subsamples; a jump either way), or, for the paper's systematic and random "
         "errors, its 3 largest rows carry more than half of Σ(ε/truth)² (a truth near "
-        "zero). Such a number describes a few tracers of this sample, not the measurement; "
+        "zero), or, for an rms ratio, a few tracers or a heavy tail carry it (above). "
+        "Such a number describes a few tracers of this sample, not the measurement; "
         "`stats.json` holds every statistic against N under `convergence` (with the reasons), "
         "and `figures/convergence.png` draws them.",
         "",
@@ -307,8 +328,9 @@ def _sensitivity_lines(cases, study):
         "again under: "
         + ", ".join(f"*{name}*" for name in ran)
         + ". **stable**: every one of these inside the 95 % interval (the largest move "
-        "beside it where one moves it by 0.5 % or more); otherwise *depends on X by Y %* "
-        "names the variant that moves it most. *excluded by optics*: the "
+        "beside it where one moves it by 0.5 % or more, and *not run: …* after it where the "
+        "band lacks a measured variant: stable over what ran only); otherwise *depends on "
+        "X by Y %* names the variant that moves it most. *excluded by optics*: the "
         "tracers left out (flagged) counted with their optics error; *threshold ×½* and "
         "*×2*: every tracer located again at that threshold in the same digitised images "
         "(reference and measured; no tracing again), with its own exclusions. ",
@@ -455,7 +477,14 @@ def summary_markdown(stats, study):
         "interval [lo, hi] (tracers resampled with replacement). *Truth not small*: the "
         "tracers with |truth| ≥ ½ rms(truth), where ε/truth has no near-zero denominators. "
         "*Baseline*: finite differences and rendering without refraction (`u^ref − u`), "
-        "which every PTV measurement has.",
+        "which every PTV measurement has. The median and the IQR of ε/truth are the "
+        "headline: a few tracers cannot carry them. The rms ratio is one only without "
+        f"`{NOT_CONVERGED}`: that marks it where it has not converged, where the largest "
+        f"{100 * TOP_FRACTION:g} % of the tracers carry more than "
+        f"{100 * TOP_SHARE_LIMIT:g} % of Σε² (*few tracers*), or where the "
+        f"errors' tail index is below {TAIL_INDEX_LIMIT:g} (*heavy tail*: the "
+        "rms of a larger sample can lie far outside its interval, which then does not "
+        "cover; see Convergence).",
         "",
     ]
     header = ["case", "G = Kρ", "Δn_max", "tracers used", "peak |ε_x| / L", "median |ε_x| / L"]
@@ -484,12 +513,12 @@ def summary_markdown(stats, study):
         symbol = component
         header = [
             "case",
-            f"rms(ε)/rms({symbol})",
             f"median ε/{symbol}",
             f"IQR ε/{symbol}",
-            "truth not small: rms ratio",
-            "median",
+            f"rms(ε)/rms({symbol})",
+            "truth not small: median",
             "IQR",
+            "rms ratio",
             "tracers: not small/all",
             "baseline rms ratio",
         ]
