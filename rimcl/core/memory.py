@@ -303,6 +303,42 @@ def check_render_memory(
     )
 
 
+#: Host bytes per grid node of one field frame a PIV sequence holds (float32 δn and ∇n).
+SEQUENCE_FIELD_BYTES_PER_NODE = 16
+#: Host bytes per pixel of one step of a PIV sequence's dense truth (dx, dy float64).
+SEQUENCE_TRUTH_BYTES_PER_PIXEL = 16
+
+
+def check_sequence_memory(shape, frames, seeds, frame_shape, physical=False):
+    """Refuse a PIV sequence whose frames cannot fit, before any is made.
+
+    A sequence holds every frame's field (:data:`SEQUENCE_FIELD_BYTES_PER_NODE`), the dense
+    truth of every step (twice with the m/s copy) and, until they are written, every
+    seed's frames (:data:`FRAME_IMAGE_BYTES_PER_PIXEL`).
+
+    Parameters
+    ----------
+    shape : tuple of 3 int
+        The field's grid ``(n3, n2, n1)``.
+    frames, seeds : int
+        Exposures per sequence and realisations.
+    frame_shape : tuple of 2 int
+        ``(rows, columns)`` of a frame, px.
+    physical : bool
+        Whether the truth is also kept in m/s.
+    """
+    nodes, pixels = _nodes(shape), int(frame_shape[0]) * int(frame_shape[1])
+    needed = frames * nodes * SEQUENCE_FIELD_BYTES_PER_NODE + nodes * FIELD_LOAD_BYTES_PER_NODE
+    needed += (frames - 1) * pixels * SEQUENCE_TRUTH_BYTES_PER_PIXEL * (2 if physical else 1)
+    needed += seeds * frames * pixels * FRAME_IMAGE_BYTES_PER_PIXEL
+    check_host(
+        needed,
+        f"{seeds} sequence(s) of {frames} frames of {frame_shape[0]} x {frame_shape[1]} px "
+        f"over a {_shape_text(shape)} field",
+        "use fewer --frames or --seeds, or smaller frames",
+    )
+
+
 def check_import_memory(shape, frames, velocity, what):
     """Refuse an import of ``frames`` frames of ``shape`` nodes that cannot fit in memory.
 
