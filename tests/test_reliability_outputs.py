@@ -295,3 +295,78 @@ def test_piv_analyze_help_states_the_pixel_convention_of_its_output():
     text = " ".join(run("piv", "analyze", "--help").output.split())
     assert "[j - 1/2, j + 1/2) x [i - 1/2, i + 1/2)" in text
     assert "[j - 1/2, j + 1/2) x [i - 1/2, i + 1/2)" in COORDINATES
+
+
+# ---------------------------------------------------------------- results and their inputs
+
+
+def _steepen(path):
+    """Rewrite a field file in place, at the same path: every density gradient 1.5 times."""
+    with h5py.File(path, "r+") as h5:
+        for frame in h5["frames"].values():
+            density = frame["density"]
+            values = density[()]
+            density[...] = values + 0.5 * (values - values.mean())
+
+
+def test_a_study_rerun_after_its_field_file_changed_measures_again(device, tmp_path):
+    from rimcl.fields.sample import sample_path
+
+    field = tmp_path / "field.h5"
+    shutil.copy(sample_path(), field)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(
+        f'[field]\npath = "{field}"\n[sensor]\nnoise = false\n[renderer]\npixels = 256\n'
+    )
+    out = tmp_path / "study"
+    args = ["study", scene, "--out", out, "--cases", "C1", "--device", device.name]
+    args += ["--tracers", "6", "--fan", "6", "--no-progress", "--no-figures"]
+    first = run(*args)
+    assert first.exit_code == 0, first.output
+    old = json.loads((out / "stats.json").read_text())["cases"][0]["delta_n_max"]
+    _steepen(field)
+    (out / "figures").mkdir()
+    (out / "figures" / "errors.png").write_text("a figure of the old numbers")
+    again = run(*args)
+    assert again.exit_code == 0, again.output
+    assert "field file changed since" in again.output and "measuring again" in again.output
+    assert "1 cases measured, 0 kept" in again.output and "up to date" not in again.output
+    assert not (out / "figures").exists()  # never beside statistics of other numbers
+    new = json.loads((out / "stats.json").read_text())["cases"][0]["delta_n_max"]
+    assert new == pytest.approx(1.5 * old, rel=1e-3)
+    third = run(*args)  # and now it is up to date
+    assert "0 cases measured, 1 kept" in third.output and "up to date" in third.output
+
+
+def test_an_lpt_study_rerun_after_its_field_file_changed_measures_again(tmp_path, lpt_flow):
+    field = tmp_path / "flow.h5"
+    shutil.copy(lpt_flow, field)
+    scene = lpt_scene(tmp_path, field)
+    scene.write_text(scene.read_text() + '[run]\nmode = "lpt"\n')
+    out = tmp_path / "study"
+    first = run("study", scene, "--out", out, "--no-figures")
+    assert first.exit_code == 0, first.output
+    old = json.loads((out / "lpt" / "lpt_stats.json").read_text())
+    _steepen(field)
+    again = run("study", scene, "--out", out, "--no-figures")
+    assert again.exit_code == 0, again.output
+    assert "field file changed since" in again.output and "measuring again" in again.output
+    assert "finished earlier, kept" not in again.output
+    new = json.loads((out / "lpt" / "lpt_stats.json").read_text())
+    assert new["inputs"] != old["inputs"]
+    assert new["inputs"]["field file"] == fingerprint(field)
+
+
+def test_a_netcdf_dimension_without_values_is_named_as_the_file_names_it(tmp_path):
+    import xarray as xr
+
+    from rimcl.fields.cf_import import import_dataset
+
+    path = tmp_path / "nocoord.nc"
+    density = xr.DataArray(np.full((4, 5, 6), 1000.0), dims=("z", "y", "x"))
+    xr.Dataset({"density": density.assign_attrs(units="kg m-3")}).to_netcdf(path, engine="h5netcdf")
+    with pytest.raises(RimclError) as error:
+        import_dataset(path, tmp_path / "o.h5", depth_axis="x")
+    text = str(error.value)
+    assert "(dimension 'z') has no coordinate values" in text
+    assert "netCDF dimension but not" not in text
