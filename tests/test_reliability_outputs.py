@@ -283,6 +283,21 @@ def test_an_output_that_is_an_input_is_refused_by_the_commands(tmp_path):
     assert field.read_bytes() == before
 
 
+def test_piv_sequence_overwrite_leaves_no_frame_of_the_earlier_run(tmp_path):
+    small = ["--camera", "plane", "--fan", "1", "--pixels", "32", "--density", "0.01"]
+    prefix = tmp_path / "s"
+    first = run("piv", "sequence", *small, "--frames", "3", "--seeds", "0,1", "-o", prefix)
+    assert first.exit_code == 0, first.output
+    assert len(list(tmp_path.glob("s_*"))) == 8
+    line = one_error_line(run("piv", "sequence", *small, "--frames", "2", "-o", prefix))
+    assert "s_seed0_000.tif exists (use --overwrite" in line
+    args = ("--frames", "2", "--seeds", "1", "-o", prefix, "--overwrite")
+    second = run("piv", "sequence", *small, *args)
+    assert second.exit_code == 0, second.output
+    left = sorted(p.name for p in tmp_path.iterdir())
+    assert left == [".s" + MANIFEST, "s_seed1_000.tif", "s_seed1_001.tif", "s_seed1_truth.h5"]
+
+
 @pytest.mark.parametrize("seeds", ["-1", "0,0", ","])
 def test_piv_sequence_seeds_are_checked_in_one_line(tmp_path, seeds):
     line = one_error_line(run("piv", "sequence", f"--seeds={seeds}", "-o", tmp_path / "s"))

@@ -108,7 +108,7 @@ class OutputSet:
         self._check_folder(prefix)
         previous = self.previous_files()
         if previous and not overwrite:
-            first = self.folder / previous[0]
+            first = self.folder / self._principal(previous)
             others = len(previous) - 1
             raise RimclError(
                 f"{first} exists (use --overwrite to replace it"
@@ -122,6 +122,15 @@ class OutputSet:
             self.staging = Path(tempfile.mkdtemp(prefix=self._staging_prefix(), dir=self.folder))
         except OSError as exc:
             raise RimclError(f"cannot write in {self.folder}: {exc.strerror}") from None
+
+    def _principal(self, files):
+        """The file an error names: the first of the command's own patterns (its main
+        file, e.g. ``stats.json``), else the first in order."""
+        for pattern in self.owned:
+            for name in files:
+                if PurePosixPath(name).match(pattern) and "/" not in pattern.replace("**/", ""):
+                    return name
+        return files[0]
 
     def _check_folder(self, prefix):
         if prefix:
