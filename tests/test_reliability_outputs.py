@@ -200,6 +200,15 @@ def test_a_camera_name_that_leaves_the_folder_writes_nothing_outside(tmp_path, l
     assert not out.exists()
 
 
+def test_an_lpt_run_that_cannot_fit_is_refused_before_work(tmp_path, lpt_flow, monkeypatch):
+    monkeypatch.setattr(memory, "host_available", lambda: 1024**2)
+    out = tmp_path / "out"
+    line = one_error_line(run("lpt", "run", lpt_scene(tmp_path, lpt_flow), "-o", out))
+    assert "LPT of 4 tracers over 5 frames with 2 cameras needs about" in line
+    assert "use fewer tracers" in line
+    assert not out.exists()  # a run refused leaves no folder behind
+
+
 def test_lpt_overwrite_replaces_the_set_and_a_failed_run_keeps_the_old(
     tmp_path, lpt_flow, monkeypatch
 ):

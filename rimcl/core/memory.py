@@ -339,6 +339,36 @@ def check_sequence_memory(shape, frames, seeds, frame_shape, physical=False):
     )
 
 
+#: Host bytes per tracer and frame of an LPT run: the true, measured and reference tracks
+#: and their threshold variants (about 25 float64 columns), rounded up. An estimate from
+#: the arrays held, not a measured peak.
+LPT_BYTES_PER_TRACER_FRAME = 256
+#: The same per camera: centroids, image points, disparities, flags and peaks of both
+#: passes and of the threshold variants (about 30 float64 values), rounded up; an estimate.
+LPT_BYTES_PER_TRACER_FRAME_CAMERA = 512
+#: Host bytes per sensor pixel of one camera frame while it is rendered and located
+#: (float64 sums, counts, labels and masks of both passes); an estimate.
+LPT_BYTES_PER_PIXEL = 48
+
+
+def check_lpt_memory(tracers, frames, cameras, pixels):
+    """Refuse an LPT run whose tracks and images cannot fit, before any is made.
+
+    Parameters
+    ----------
+    tracers, frames, cameras : int
+    pixels : int
+        Pixels of the largest sensor.
+    """
+    per_frame = LPT_BYTES_PER_TRACER_FRAME + cameras * LPT_BYTES_PER_TRACER_FRAME_CAMERA
+    needed = tracers * frames * per_frame + cameras * pixels * LPT_BYTES_PER_PIXEL
+    check_host(
+        needed,
+        f"LPT of {tracers} tracers over {frames} frames with {cameras} cameras",
+        "use fewer tracers (tracers.count, illumination.ppp) or frames",
+    )
+
+
 def check_import_memory(shape, frames, velocity, what):
     """Refuse an import of ``frames`` frames of ``shape`` nodes that cannot fit in memory.
 

@@ -35,7 +35,7 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.imaging.frames import THRESHOLD_VARIANTS
 from rimcl.lpt.calibration import PinholeModel, SoloffModel, target_points, triangulate
-from rimcl.lpt.config import CameraSpec, preset_cameras
+from rimcl.lpt.config import CameraSpec, check_run_memory, preset_cameras
 from rimcl.lpt.config import describe as describe_scene
 from rimcl.lpt.flow import BUILTIN_DT, Volume, builtin_flow, volume_velocity
 from rimcl.lpt.images import (
@@ -134,6 +134,7 @@ def prepare(scene, out_dir, timings):
         count = max(
             1, round(scene.illumination.ppp * spec.sensor_pixels[0] * spec.sensor_pixels[1])
         )
+    check_run_memory(scene, count, frames)
     start = volume.seed(count, np.random.default_rng(scene.measure.tracers.seed))
     true = integrate_tracks(velocity, start, moments)
     u_true = track_velocity(velocity, true, moments)
