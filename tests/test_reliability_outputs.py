@@ -110,6 +110,20 @@ def test_a_subfolder_linked_outside_is_refused_before_anything_moves(tmp_path):
     assert (out / "a.txt").read_text() == "old a"
 
 
+def test_a_second_run_into_a_set_being_written_is_refused_and_a_dead_ones_staging_removed(
+    tmp_path,
+):
+    out = tmp_path / "out"
+    running = OutputSet(out)
+    _write(running, "a.txt", text="being written")
+    with pytest.raises(RimclError, match="another rimcl run is writing"):
+        OutputSet(out, overwrite=True)
+    running._lock.close()  # as if its process had died: its staging is stale
+    with OutputSet(out, overwrite=True) as outputs:
+        _write(outputs, "b.txt", text="b")
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "b.txt"]
+
+
 def test_an_output_that_is_an_input_is_refused(tmp_path):
     out = tmp_path / "out"
     field = out / "field.h5"

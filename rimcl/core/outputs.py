@@ -30,6 +30,8 @@ from rimcl.core.errors import RimclError
 MANIFEST = ".rimcl-outputs.json"
 #: Prefix of a set's staging folder (removed when the run ends, or by the next run).
 STAGING = ".rimcl-staging-"
+#: File in a staging folder locked while its run lives.
+LOCK = ".lock"
 
 
 def check_file_name(name, what="a name"):
@@ -120,6 +122,8 @@ class OutputSet:
         self._remove_stale_staging()
         try:
             self.staging = Path(tempfile.mkdtemp(prefix=self._staging_prefix(), dir=self.folder))
+            # held while this run lives: another run sees it is not stale
+            self._lock = _locked(self.staging / LOCK)
         except OSError as exc:
             raise RimclError(f"cannot write in {self.folder}: {exc.strerror}") from None
 
@@ -156,8 +160,17 @@ class OutputSet:
         """Staging folders a killed run of this same set left behind."""
         pattern = glob.escape(self._staging_prefix()) + "*"
         for stale in self.folder.glob(pattern):
-            if stale.is_dir() and not stale.is_symlink():
-                shutil.rmtree(stale, ignore_errors=True)
+            if not stale.is_dir() or stale.is_symlink():
+                continue
+            try:
+                held = _locked(stale / LOCK, wait=False)
+            except OSError:
+                raise RimclError(
+                    f"another rimcl run is writing {self.label} ({stale.name}); wait for it, "
+                    "or choose another output"
+                ) from None
+            held.close()
+            shutil.rmtree(stale, ignore_errors=True)
 
     # -- the set --------------------------------------------------------------------------
 
@@ -213,8 +226,8 @@ class OutputSet:
             for name in files:
                 path = Path(root) / name
                 rel = path.relative_to(self.staging)
-                if name.startswith(".") and name.endswith(".part"):
-                    continue  # an atomic write's partial file
+                if (name.startswith(".") and name.endswith(".part")) or rel == Path(LOCK):
+                    continue  # an atomic write's partial file, the lock
                 if self.prefix is not None and len(rel.parts) != 1:
                     raise RimclError(f"output {rel} of a prefix set is in a subfolder")
                 staged.append(rel)
@@ -249,6 +262,8 @@ class OutputSet:
             old = self.folder / rel
             if any(_same(old, source) for source in self.inputs):
                 continue
+            if not Path(os.path.realpath(old.parent)).is_relative_to(inside):
+                continue  # listed under a folder that now links elsewhere: not ours
             old.unlink(missing_ok=True)
             self._prune(old.parent)
         with atomic_path(self.manifest, overwrite=True) as tmp:
@@ -271,6 +286,7 @@ class OutputSet:
         if self.staging is not None:
             shutil.rmtree(self.staging, ignore_errors=True)
             self.staging = None
+            self._lock.close()
             if self.created and not self.manifest.exists():
                 # a folder this set made and never filled: not left behind
                 with contextlib.suppress(OSError):
@@ -288,6 +304,22 @@ class OutputSet:
         else:
             self.discard()
         return False
+
+
+def _locked(path, wait=True):
+    """An open file holding an exclusive lock on ``path`` (created); without ``wait`` an
+    ``OSError`` when another process holds it. No lock where ``fcntl`` is missing."""
+    handle = open(path, "a+b")
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not on POSIX: no lock
+        return handle
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+    except OSError:
+        handle.close()
+        raise
+    return handle
 
 
 def _same(path, other):
