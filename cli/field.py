@@ -13,6 +13,7 @@ from rimcl.cli.options import (
     handle_errors,
     overwrite_option,
 )
+from rimcl.core.atomic import check_not_input
 from rimcl.core.errors import RimclError
 
 _output_option = click.option(
@@ -231,6 +232,7 @@ def import_(inputs, axes, crop, stride, frames, t0, dt, boundary, period, gradie
     from rimcl.fields.cf_import import import_dataset, is_cf_input
     from rimcl.fields.jhtdb import import_flow
 
+    check_not_input(output, inputs)  # an import never replaces what it reads
     cf_options = (depth_axis, variable, quantity, units, velocity, n_ref)
     if any(v is not None for v in cf_options) or is_cf_input(inputs):
         if len(inputs) != 1:
@@ -348,6 +350,7 @@ def show(field_path, frame, time, plane, at, quantity, case, k_rho, output, over
     from rimcl.fields.sample import sample_path
 
     path = field_path or sample_path()
+    check_not_input(output, [path])
     options = dict(frame=frame, time=time, plane=plane, at=at, quantity=quantity, case=case,
                    k_rho=k_rho)  # fmt: skip
     figure = slice_figure(path, **options)

@@ -119,7 +119,8 @@ def analyze(
     """Correlate two grey TIFF frames A and B into a displacement field (HDF5).
 
     Vectors are at window centres, x along image columns and y along rows (pixels; pixel
-    (row i, column j) covers [j, j+1) x [i, i+1)); dx, dy move B relative to A.
+    centres at integer coordinates: pixel (row i, column j) is at (x, y) = (j, i) and
+    covers [j - 1/2, j + 1/2) x [i - 1/2, i + 1/2)); dx, dy move B relative to A.
 
     \b
     Example:
@@ -408,6 +409,7 @@ def render(
     scene, case, k_rho, piv_config, configs = frame_configs(
         scene_file, scene_option, case, k_rho, peak_fraction, scaling, step, options
     )
+    check_outputs(prefix, overwrite, [scene["field"]["path"], scene_file, scene_option])
     result = run_piv_render(
         scene["field"]["path"] or None,
         case=case,
@@ -476,34 +478,35 @@ def sequence(
       rimcl piv sequence --case C2 --frames 5 --seeds 0,1,2 -o c2
     """
     from rimcl.core.errors import RimclError
-    from rimcl.piv.sequence import (
-        check_sequence_outputs,
-        run_piv_sequence,
-        write_piv_sequence,
-    )
+    from rimcl.piv.sequence import open_sequence_outputs, run_piv_sequence, write_piv_sequence
 
     try:
         seed_list = [int(s) for s in seeds.split(",") if s.strip()]
     except ValueError:
         raise RimclError(f"--seeds takes comma-separated integers, got {seeds!r}") from None
-    check_sequence_outputs(prefix, seed_list, frames, overwrite)
+    if not seed_list or min(seed_list) < 0 or len(set(seed_list)) != len(seed_list):
+        raise RimclError(
+            f"--seeds takes distinct comma-separated integers >= 0 (at least one), got {seeds!r}"
+        )
     scene, case, k_rho, piv_config, configs = frame_configs(
         scene_file, scene_option, case, k_rho, peak_fraction, scaling, step, options
     )
-    made = run_piv_sequence(
-        scene["field"]["path"] or None,
-        case=case,
-        k_rho=k_rho,
-        piv=piv_config,
-        frames=frames,
-        seeds=seed_list,
-        length_m=scene["field"]["length_m"],
-        time_s=scene["field"]["time_s"],
-        progress=True,
-        **configs,
-    )
-    for result in made:
-        paths = write_piv_sequence(prefix, result, overwrite=overwrite)
+    inputs = [scene["field"]["path"], scene_file, scene_option]
+    with open_sequence_outputs(prefix, overwrite, inputs) as outputs:
+        made = run_piv_sequence(
+            scene["field"]["path"] or None,
+            case=case,
+            k_rho=k_rho,
+            piv=piv_config,
+            frames=frames,
+            seeds=seed_list,
+            length_m=scene["field"]["length_m"],
+            time_s=scene["field"]["time_s"],
+            progress=True,
+            **configs,
+        )
+        written = [(result, write_piv_sequence(outputs, result)) for result in made]
+    for result, paths in written:
         rms = np.sqrt(np.mean(result.truth_px**2, axis=(0, 1, 2)))
         click.echo(
             f"seed {result.seed}: {result.config['n_tracers']} tracers, {frames} frames; "

@@ -240,6 +240,9 @@ def render(
         run=dataclasses.replace(config.run, frame_image=frame_image is not None),
     )
     field_path = scene["field"]["path"] or None
+    for path in (output, frame_image):  # an output that is an input: refused before work
+        if path is not None:
+            check_output(path, True, [field_path, scene_file, scene_option])
     result = run_render(field_path, case=case, k_rho=k_rho, config=config, progress=True)
     write_render(output, result, overwrite=overwrite)
     if frame_image is not None:

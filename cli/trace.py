@@ -149,6 +149,7 @@ def trace(
     precision = integrator["precision"]
     step = parsed_step if isinstance(parsed_step, str) else integrator["step"]
     field_path = field_keys["path"] or None
+    check_output(output, True, [field_path, scene_file, scene_option, rays_path])
     if analytic is not None:
         field = analytic_field(analytic)
         source = {"analytic": analytic, "params": field.params}

@@ -257,5 +257,5 @@ def test_study_scene_names_delta_n(tank):
 def test_netcdf_dimension_without_coordinates_is_one_line(tmp_path):
     with h5py.File(tmp_path / "bad.nc", "w") as h5:
         h5["temperature"] = np.zeros((3, 3, 3))
-    with pytest.raises(RimclError, match="no coordinate variable"):
+    with pytest.raises(RimclError, match="has no coordinate values"):
         import_dataset(tmp_path / "bad.nc", tmp_path / "o.h5", depth_axis="x")

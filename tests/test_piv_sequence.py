@@ -10,7 +10,7 @@ import tifffile
 from test_piv_images import SMALL_PIV, _moving_box, small
 
 from rimcl.core.errors import RimclError
-from rimcl.piv.sequence import run_piv_sequence, write_piv_sequence
+from rimcl.piv.sequence import open_sequence_outputs, run_piv_sequence, write_piv_sequence
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,8 @@ def test_sequence_of_a_uniform_flow_knows_its_truth(box, device, tmp_path):
     assert second.positions.shape[1] == count
     assert not np.array_equal(first.positions, second.positions)
     assert not np.array_equal(first.frames.images, second.frames.images)
-    paths = write_piv_sequence(tmp_path / "seq", first)
+    with open_sequence_outputs(tmp_path / "seq") as outputs:
+        paths = write_piv_sequence(outputs, first)
     assert [p.name for p in paths] == [
         "seq_seed1_000.tif",
         "seq_seed1_001.tif",

@@ -13,15 +13,33 @@ from pathlib import Path
 from rimcl.core.errors import RimclError
 
 
-def check_output(path, overwrite=True):
-    """Refuse, before any work is done, an output that exists (unless ``overwrite``) or
-    whose directory is missing or not writable.
+def check_not_input(output, inputs):
+    """Refuse an output path that is one of the run's input files (writing it would
+    destroy the input)."""
+    output = Path(output)
+    for source in inputs:
+        if source is None or str(source) == "":
+            continue
+        same = Path(os.path.abspath(output)) == Path(os.path.abspath(source))
+        with contextlib.suppress(OSError):
+            same = same or os.path.samefile(output, source)
+        if same:
+            raise RimclError(
+                f"output {output} is an input of this run ({source}); choose another output"
+            )
+    return output
+
+
+def check_output(path, overwrite=True, inputs=()):
+    """Refuse, before any work is done, an output that exists (unless ``overwrite``),
+    that is one of ``inputs`` (the run's input files), or whose directory is missing or
+    not writable.
 
     Returns
     -------
     Path
     """
-    path = Path(path)
+    path = check_not_input(path, inputs)
     if path.exists() and not overwrite:
         raise RimclError(f"{path} exists (use --overwrite to replace it)")
     parent = path.parent

@@ -303,6 +303,72 @@ def check_render_memory(
     )
 
 
+#: Host bytes per grid node of one field frame a PIV sequence holds (float32 δn and ∇n).
+SEQUENCE_FIELD_BYTES_PER_NODE = 16
+#: Host bytes per pixel of one step of a PIV sequence's dense truth (dx, dy float64).
+SEQUENCE_TRUTH_BYTES_PER_PIXEL = 16
+
+
+def check_sequence_memory(shape, frames, seeds, frame_shape, physical=False):
+    """Refuse a PIV sequence whose frames cannot fit, before any is made.
+
+    A sequence holds every frame's field (:data:`SEQUENCE_FIELD_BYTES_PER_NODE`), the dense
+    truth of every step (twice with the m/s copy) and, until they are written, every
+    seed's frames (:data:`FRAME_IMAGE_BYTES_PER_PIXEL`).
+
+    Parameters
+    ----------
+    shape : tuple of 3 int
+        The field's grid ``(n3, n2, n1)``.
+    frames, seeds : int
+        Exposures per sequence and realisations.
+    frame_shape : tuple of 2 int
+        ``(rows, columns)`` of a frame, px.
+    physical : bool
+        Whether the truth is also kept in m/s.
+    """
+    nodes, pixels = _nodes(shape), int(frame_shape[0]) * int(frame_shape[1])
+    needed = frames * nodes * SEQUENCE_FIELD_BYTES_PER_NODE + nodes * FIELD_LOAD_BYTES_PER_NODE
+    needed += (frames - 1) * pixels * SEQUENCE_TRUTH_BYTES_PER_PIXEL * (2 if physical else 1)
+    needed += seeds * frames * pixels * FRAME_IMAGE_BYTES_PER_PIXEL
+    check_host(
+        needed,
+        f"{seeds} sequence(s) of {frames} frames of {frame_shape[0]} x {frame_shape[1]} px "
+        f"over a {_shape_text(shape)} field",
+        "use fewer --frames or --seeds, or smaller frames",
+    )
+
+
+#: Host bytes per tracer and frame of an LPT run: the true, measured and reference tracks
+#: and their threshold variants (about 25 float64 columns), rounded up. An estimate from
+#: the arrays held, not a measured peak.
+LPT_BYTES_PER_TRACER_FRAME = 256
+#: The same per camera: centroids, image points, disparities, flags and peaks of both
+#: passes and of the threshold variants (about 30 float64 values), rounded up; an estimate.
+LPT_BYTES_PER_TRACER_FRAME_CAMERA = 512
+#: Host bytes per sensor pixel of one camera frame while it is rendered and located
+#: (float64 sums, counts, labels and masks of both passes); an estimate.
+LPT_BYTES_PER_PIXEL = 48
+
+
+def check_lpt_memory(tracers, frames, cameras, pixels):
+    """Refuse an LPT run whose tracks and images cannot fit, before any is made.
+
+    Parameters
+    ----------
+    tracers, frames, cameras : int
+    pixels : int
+        Pixels of the largest sensor.
+    """
+    per_frame = LPT_BYTES_PER_TRACER_FRAME + cameras * LPT_BYTES_PER_TRACER_FRAME_CAMERA
+    needed = tracers * frames * per_frame + cameras * pixels * LPT_BYTES_PER_PIXEL
+    check_host(
+        needed,
+        f"LPT of {tracers} tracers over {frames} frames with {cameras} cameras",
+        "use fewer tracers (tracers.count, illumination.ppp) or frames",
+    )
+
+
 def check_import_memory(shape, frames, velocity, what):
     """Refuse an import of ``frames`` frames of ``shape`` nodes that cannot fit in memory.
 

@@ -137,8 +137,11 @@ def _read_h5(path):
             continue  # a dimension without coordinate values
         dims = []
         for k, dim in enumerate(item.dims):
-            scales = list(dim.keys()) if len(dim) else []
-            label = dim.label or (scales[0].rsplit("/", 1)[-1] if scales else f"dim{k}")
+            # a netCDF dimension without values is a scale whose NAME is netCDF's internal
+            # note ("This is a netCDF dimension but not ..."): its dataset's name is the
+            # dimension's; a dimension without a scale is named by its position
+            scale = dim[0].name if len(dim) else None
+            label = dim.label or (scale.rsplit("/", 1)[-1] if scale else f"dim{k}")
             dims.append(label.rsplit("/", 1)[-1])
         variables[name] = _Variable(name, tuple(dims), attrs, item.shape, _reader(path, item))
     return h5, variables
@@ -555,9 +558,13 @@ def _coordinates(variables, dim_of, counts, path):
     for letter, dim in dim_of.items():
         var = variables.get(dim)
         if var is None or len(var.dims) != 1:
+            unnamed = dim.startswith("dim") and dim[3:].isdigit()
             raise RimclError(
-                f"{path}: dimension {dim!r} has no coordinate variable; rimcl needs the node "
-                "positions (a 1-D variable of the same name)"
+                f"{path}: axis {letter} "
+                + (f"(unnamed dimension {dim[3:]})" if unnamed else f"(dimension {dim!r})")
+                + " has no coordinate values; rimcl needs the node positions: a 1-D variable "
+                "named after the dimension"
+                + (" (name the dimensions)" if unnamed else f" ({dim}, with units)")
             )
         values = var.read(()).reshape(-1)
         if values.size != counts[letter]:

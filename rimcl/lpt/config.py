@@ -217,3 +217,14 @@ def describe(scene):
         "illumination": dataclasses.asdict(scene.illumination),
         "lpt": dataclasses.asdict(scene.lpt),
     }
+
+
+def check_run_memory(scene, tracers, frames):
+    """Refuse, before any track or image is made, an LPT run of ``tracers`` over ``frames``
+    that cannot fit in memory (:func:`rimcl.core.memory.check_lpt_memory`); a preset rig
+    counts as four cameras of the default sensor."""
+    from rimcl.core.memory import check_lpt_memory
+
+    specs = scene.rig.cameras or [CameraSpec((0, 0, 0), (0, 0, 0))] * 4
+    pixels = max(int(spec.sensor_pixels[0]) * int(spec.sensor_pixels[1]) for spec in specs)
+    check_lpt_memory(tracers, frames, len(specs), pixels)

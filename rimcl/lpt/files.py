@@ -43,12 +43,13 @@ with named dimensions (HDF5 dimension scales) and a ``units`` attribute on every
 """
 
 import json
-from pathlib import Path
 
 import h5py
 import numpy as np
 
 from rimcl.core.atomic import atomic_path
+from rimcl.core.fingerprint import fingerprint
+from rimcl.core.outputs import OutputSet
 from rimcl.core.provenance import stamp_h5, to_json
 from rimcl.core.tables_h5 import (
     TRACER_DIMENSIONS,
@@ -83,6 +84,26 @@ def _units(run):
         "disparity": "pixels",
         "time": "field time units" + each.get("T0", ""),
     }
+
+
+#: The files ``rimcl lpt run`` and ``rimcl lpt render`` write in their output folder (an
+#: earlier run's are replaced as a set, :class:`rimcl.core.outputs.OutputSet`).
+OWNED = ("lpt_stats.json", "lpt_case_*.h5", "dataset/**/*")
+
+
+def open_outputs(out_dir, scene, overwrite=False):
+    """The output set of an LPT run in ``out_dir``: an earlier run's files are refused
+    before any work (unless ``overwrite``) and replaced, as a set, only when the whole run
+    succeeded; the field file may not be an output."""
+    return OutputSet(
+        out_dir, overwrite=overwrite, owned=OWNED, inputs=[scene.study.field_path or None]
+    )
+
+
+def lpt_inputs(field_path):
+    """The fingerprints of the files an LPT run reads (``{"field file": ...}``; the built-in
+    flow, made by rimcl itself: ``"built-in"``), recorded in ``lpt_stats.json``."""
+    return {"field file": fingerprint(field_path) if field_path else "built-in"}
 
 
 def write_case(path, run, result, scene, overwrite=True):
@@ -181,9 +202,10 @@ def _to_mm(points, length_m):
     return np.asarray(points)[..., XYZ_AXES] * length_m * 1e3
 
 
-def frame_writer(out_dir, scene, overwrite=True):
+def frame_writer(outputs, scene):
     """A ``frame_sink`` for :func:`rimcl.lpt.run.run_case` that writes each camera frame as
-    a 16-bit TIFF: ``dataset/<case>/images/{field,uniform}/<cam>_frame<ffff>.tif``."""
+    a 16-bit TIFF: ``dataset/<case>/images/{field,uniform}/<cam>_frame<ffff>.tif`` of the
+    output set ``outputs`` (:class:`rimcl.core.outputs.OutputSet`)."""
     import tifffile
 
     from rimcl.lpt.config import describe
@@ -191,20 +213,20 @@ def frame_writer(out_dir, scene, overwrite=True):
     labels = {"meas": "field", "ref": "uniform"}
 
     def write(case, kind, camera, frame, counts):
-        images = Path(out_dir) / "dataset" / case / "images" / labels[kind]
-        images.mkdir(parents=True, exist_ok=True)
         config = to_json({**describe(scene), "case": case, "camera": camera.name})
-        name = images / f"{camera.name}_frame{frame:04d}.tif"
-        with atomic_path(name, overwrite) as tmp:
+        name = outputs.path(
+            "dataset", case, "images", labels[kind], f"{camera.name}_frame{frame:04d}.tif"
+        )
+        with atomic_path(name) as tmp:
             tifffile.imwrite(tmp, counts, description=config, photometric="minisblack")
 
     return write
 
 
-def write_dataset(out_dir, run, result, scene, overwrite=True):
-    """Files for LPT codes (layout in the module docstring). Returns the directory."""
-    folder = out_dir / "dataset" / result["case"]
-    folder.mkdir(parents=True, exist_ok=True)
+def write_dataset(outputs, run, result, scene, overwrite=True):
+    """Files for LPT codes (layout in the module docstring) in the output set ``outputs``
+    (:class:`rimcl.core.outputs.OutputSet`). Returns the (staging) directory."""
+    folder = outputs.folder_path("dataset", result["case"])
     target_mm = _to_mm(result["target"], run.length_m)
     pixels = result["target_pixels"]
     columns = [target_mm] + [pixels[c] for c in range(len(pixels))]
@@ -225,7 +247,7 @@ def write_dataset(out_dir, run, result, scene, overwrite=True):
         pinhole = result["calibration"][c]["pinhole"]
         matrix_mm = np.asarray(pinhole["matrix"]) @ to_field
         write_json(
-            folder / f"{camera.name}_pinhole.json",
+            outputs.path("dataset", result["case"], f"{camera.name}_pinhole.json"),
             {
                 "dlt_matrix_mm_to_px": matrix_mm.tolist(),
                 "dlt_matrix_note": "[u w, v w, w] = P [X, Y, Z, 1], X Y Z in mm",

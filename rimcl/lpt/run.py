@@ -36,7 +36,7 @@ from rimcl.core.errors import RimclError
 from rimcl.imaging.frames import THRESHOLD_VARIANTS
 from rimcl.lpt import checks
 from rimcl.lpt.calibration import PinholeModel, SoloffModel, target_points, triangulate
-from rimcl.lpt.config import CameraSpec, preset_cameras
+from rimcl.lpt.config import CameraSpec, check_run_memory, preset_cameras
 from rimcl.lpt.config import describe as describe_scene
 from rimcl.lpt.flow import BUILTIN_DT, Volume, builtin_flow, volume_velocity
 from rimcl.lpt.images import (
@@ -134,6 +134,7 @@ def prepare(scene, out_dir, timings):
         count = max(
             1, round(scene.illumination.ppp * spec.sensor_pixels[0] * spec.sensor_pixels[1])
         )
+    check_run_memory(scene, count, frames)
     start = volume.seed(count, np.random.default_rng(scene.measure.tracers.seed))
     true = integrate_tracks(velocity, start, moments)
     u_true = track_velocity(velocity, true, moments)
@@ -642,30 +643,36 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
         The statistics document written to ``lpt_stats.json``.
     """
     from rimcl.core.provenance import versions
-    from rimcl.lpt.files import frame_writer, write_case, write_dataset, write_json
+    from rimcl.lpt.files import open_outputs
 
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    stats_path = out_dir / "lpt_stats.json"
-    if stats_path.exists() and not overwrite:
-        raise RimclError(f"{stats_path} exists; pass --overwrite to replace it")
+    # an earlier run refused before any work; its files replaced only by a whole new set
+    with open_outputs(out_dir, scene, overwrite) as outputs:
+        return _run_cases(scene, out_dir, outputs, device, progress, dataset, versions())
+
+
+def _run_cases(scene, out_dir, outputs, device, progress, dataset, versions):
+    """:func:`run_lpt`'s cases, written into the output set ``outputs``."""
+    from rimcl.lpt.files import frame_writer, lpt_inputs, write_case, write_dataset, write_json
+
     timings = {}
     run = prepare(scene, out_dir, timings)
     document = {
         "scene": describe_scene(scene),
         "study_scene": scene.study.scene_record(),
+        "inputs": lpt_inputs(scene.study.field_path),
         "volume": run.volume.describe(),
         "length_m": run.length_m,
         "time_s": run.time_s,
         "times": run.times.tolist(),
         "tracers": int(run.true.shape[1]),
-        "versions": versions(),
+        "versions": versions,
         "timings_s": timings,
         "cases": {},
     }
     try:
         for case in scene.study.names:
-            sink = frame_writer(out_dir, scene, overwrite) if dataset and scene.lpt.images else None
+            sink = frame_writer(outputs, scene) if dataset and scene.lpt.images else None
             result = run_case(run, scene, case, device, progress, sink)
             stats = case_statistics(run, result, scene)
             stats["rays"] = result["rays"]
@@ -693,14 +700,14 @@ def run_lpt(scene, out_dir, device=None, progress=None, overwrite=False, dataset
             kept = (result["flags"] & ~FLAG_IMAGE_LOST) == 0  # each variant loses its own
             stats["sensitivity"] = threshold_sensitivity(run, result, stats, kept, scene)
             started = time.perf_counter()
-            write_case(out_dir / f"lpt_case_{result['case']}.h5", run, result, scene, overwrite)
+            write_case(outputs.path(f"lpt_case_{result['case']}.h5"), run, result, scene)
             if dataset:
-                write_dataset(out_dir, run, result, scene, overwrite)
+                write_dataset(outputs, run, result, scene)
             stats["timings_s"]["write"] = time.perf_counter() - started
             document["cases"][result["case"]] = stats
     finally:
         run.source.close()
-    write_json(stats_path, document)
+    write_json(outputs.path("lpt_stats.json"), document)
     return document
 
 

@@ -10,20 +10,29 @@ finished results unless forced.
 import json
 from pathlib import Path
 
+from rimcl.core.fingerprint import input_changes
 from rimcl.lpt.config import LptScene
+from rimcl.lpt.files import lpt_inputs
 from rimcl.lpt.run import run_lpt, summary_lines
 from rimcl.stats.tables import write_json
 
 LPT_DIR = "lpt"
 
 
-def _finished(path, study):
-    """The earlier ``lpt_stats.json`` of this same scene, or None."""
+def _finished(path, study, say):
+    """The earlier ``lpt_stats.json`` of this same scene and input content, or None (with
+    a line saying why it is measured again)."""
     try:
         previous = json.loads(Path(path).read_text())
     except (OSError, ValueError):
         return None
-    return previous if previous.get("study_scene") == study.scene_record() else None
+    if previous.get("study_scene") != study.scene_record():
+        return None
+    changes = input_changes(previous.get("inputs"), lpt_inputs(study.field_path))
+    if changes:
+        say(f"lpt: {Path(path).name} {'; '.join(changes)}; measuring again")
+        return None
+    return previous
 
 
 def run_lpt_study(study, out_dir, *, force=False, figures=True, report=None):
@@ -50,7 +59,7 @@ def run_lpt_study(study, out_dir, *, force=False, figures=True, report=None):
     say = report or (lambda line: None)
     lpt_scene = LptScene(study)
     folder = Path(out_dir) / LPT_DIR
-    document = None if force else _finished(folder / "lpt_stats.json", study)
+    document = None if force else _finished(folder / "lpt_stats.json", study, say)
     ran = []
     if document is None:
         say(f"lpt: cases {', '.join(study.names)}")

@@ -694,7 +694,7 @@ def analyze_files(path_a, path_b, output, settings=None, overwrite=False):
     from rimcl.core.atomic import check_output
     from rimcl.core.memory import check_host
 
-    check_output(output, overwrite)
+    check_output(output, overwrite, inputs=[path_a, path_b])
     settings = PivSettings() if settings is None else settings
     headers = [tiff_shape(path) for path in (path_a, path_b)]
     for path, (shape, dtype) in zip((path_a, path_b), headers, strict=True):

@@ -33,8 +33,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from rimcl.core.atomic import atomic_path, check_output
+from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
+from rimcl.core.outputs import OutputSet
 from rimcl.core.provenance import stamp_h5
 from rimcl.core.tables_h5 import TRACER_DIMENSIONS, add_scale, write_variable
 from rimcl.fields.crop import CroppedSource
@@ -174,6 +175,7 @@ def run_piv_sequence(
     list of PivSequence
     """
     from rimcl.core.device import describe_device, select_device
+    from rimcl.core.memory import check_sequence_memory
     from rimcl.ptv.field_source import case_of, open_source
 
     piv = PivConfig() if piv is None else piv
@@ -201,6 +203,9 @@ def run_piv_sequence(
         device = select_device(run.device)
         renderer = imaging.renderer(scene, cam)
         shape = imaging.frame_shape(scene, cam)
+        check_sequence_memory(
+            source.shape, frames, len(seeds), shape, length_m is not None and time_s is not None
+        )
         fields = [case_index.field(source, f, t) for f, t in zip(stored, times, strict=True)]
         options = {"interp": integrator.interp, "precision": integrator.precision}
         options.update(device=device, step=integrator.step)
@@ -276,20 +281,28 @@ def sequence_paths(prefix, seed, frames):
     return tiffs, prefix.with_name(f"{prefix.name}_seed{seed}_truth.h5")
 
 
-def check_sequence_outputs(prefix, seeds, frames, overwrite=False):
-    """Refuse, before any work, outputs that exist (unless ``overwrite``)."""
-    for seed in seeds:
-        tiffs, truth = sequence_paths(prefix, seed, frames)
-        for path in (*tiffs, truth):
-            check_output(path, overwrite)
+#: The files ``rimcl piv sequence`` writes for a prefix (an earlier run's are replaced as a
+#: set, :class:`rimcl.core.outputs.OutputSet`).
+SEQUENCE_OWNED = ("{prefix}_seed*_[0-9][0-9][0-9]*.tif", "{prefix}_seed*_truth.h5")
 
 
-def write_piv_sequence(prefix, sequence, overwrite=True):
-    """Write one realisation's frames and truth (module docstring); returns the paths."""
+def open_sequence_outputs(prefix, overwrite=False, inputs=()):
+    """The output set of ``rimcl piv sequence`` with ``prefix``: an earlier run's files
+    (every seed and frame of it) are refused before any work unless ``overwrite``, and
+    replaced as a set only when the whole run succeeded; no input may be an output."""
+    return OutputSet(prefix, overwrite=overwrite, prefix=True, owned=SEQUENCE_OWNED, inputs=inputs)
+
+
+def write_piv_sequence(outputs, sequence):
+    """Write one realisation's frames and truth (module docstring) into the output set
+    ``outputs`` (:func:`open_sequence_outputs`); returns the final paths."""
+    prefix = outputs.folder / outputs.prefix
     tiffs, truth = sequence_paths(prefix, sequence.seed, len(sequence.times))
     for path, image in zip(tiffs, sequence.frames.images, strict=True):
-        write_tiff(path, image, sequence.config, overwrite)
-    with atomic_path(truth, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as h5:
+        write_tiff(outputs.path(path.name), image, sequence.config)
+    final = truth
+    truth = outputs.path(truth.name)
+    with atomic_path(truth) as tmp, h5py.File(tmp, "w") as h5:
         h5.attrs["rimcl_schema"] = SEQUENCE_SCHEMA
         h5.attrs["schema_version"] = 2  # 2: (id, frame) particles, named dimensions
         h5.attrs["units"] = (
@@ -332,4 +345,4 @@ def write_piv_sequence(prefix, sequence, overwrite=True):
             dimensions = (*TRACER_DIMENSIONS, last) if last else TRACER_DIMENSIONS
             write_variable(particles, name, np.swapaxes(values, 0, 1), dimensions, units)
         stamp_h5(h5, sequence.config, sequence.device)
-    return [*tiffs, truth]
+    return [*tiffs, final]

@@ -32,6 +32,7 @@ import numpy as np
 
 from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
+from rimcl.core.fingerprint import input_changes
 from rimcl.core.provenance import stamp_h5, to_json
 from rimcl.core.tables_h5 import label_grid
 from rimcl.piv.analysis import (
@@ -624,8 +625,11 @@ def case_file_problem(path, record, case):
             recorded = h5.attrs.get(STUDY_RECORD)
             if held != case:
                 return f"holds case {held!r}, not {case!r}"
-            if recorded is None or json.loads(recorded) != json.loads(to_json(record)):
-                return "made for another scene"
+            recorded = None if recorded is None else json.loads(recorded)
+            if recorded is None or recorded != json.loads(to_json(record)):
+                # a field file rewritten since: said as such, not as another scene
+                changes = input_changes((recorded or {}).get("inputs"), record.get("inputs", {}))
+                return "; ".join(changes) if changes else "made for another scene"
     except (OSError, ValueError) as exc:
         return f"unreadable ({type(exc).__name__})"
     return None

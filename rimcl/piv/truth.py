@@ -159,10 +159,11 @@ def output_paths(prefix):
     return paths
 
 
-def check_outputs(prefix, overwrite=False):
-    """Refuse, before any work, outputs that exist (unless ``overwrite``) or cannot be written."""
+def check_outputs(prefix, overwrite=False, inputs=()):
+    """Refuse, before any work, outputs that exist (unless ``overwrite``), cannot be
+    written, or are one of ``inputs`` (the run's input files)."""
     for path in output_paths(prefix).values():
-        check_output(path, overwrite)
+        check_output(path, overwrite, inputs)
 
 
 def write_piv_render(prefix, result, overwrite=True):

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from rimcl.core.errors import RimclError
+from rimcl.core.outputs import check_file_name
 from rimcl.scene.keys import KEYS_BY_NAME
 from rimcl.scene.keys_lpt import CAMERA_SECTION, DEFAULT_PRESET, camera_keys
 from rimcl.scene.validate import check_value, suggest
@@ -149,6 +150,8 @@ def _cameras(tables, where):
         if "sensor_pixels" in values:
             _length(values["sensor_pixels"], 2, f"{section}.sensor_pixels", where, "two numbers")
         values["name"] = values.get("name") or f"cam{index + 1}"
+        # the dataset's files are named after the camera: one plain file name
+        check_file_name(values["name"], f"{section}.name in {where}:")
         cameras.append(CameraSpec(**values))
     names = [c.name for c in cameras]
     if len(set(names)) != len(names):

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from rimcl.core.errors import RimclError
+from rimcl.core.outputs import OutputSet
 from rimcl.core.provenance import STUDY_MARKER, versions
 from rimcl.stats.bootstrap import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, TracerBootstrap
 from rimcl.stats.consistency import scene_mismatches
@@ -311,6 +312,10 @@ def compute_stats(all_tables, config=None):
     }
 
 
+#: The files ``rimcl stats`` writes in its output folder (replaced as a set).
+STATS_OWNED = ("stats.json", "stats.csv", "figures/**/*")
+
+
 def run_stats(paths, out_dir, overwrite=False, figures=True, config=None, mixed=False):
     """Statistics (and figures) of several ``rimcl render`` files: what ``rimcl stats`` does.
 
@@ -359,20 +364,15 @@ def run_stats(paths, out_dir, overwrite=False, figures=True, config=None, mixed=
             f"the render files come from different scenes ({shown}); compare them anyway "
             "with --mixed-scenes"
         )
-    stats_path = out_dir / "stats.json"
-    for existing in (stats_path, out_dir / "figures") if figures else (stats_path,):
-        if existing.exists() and not overwrite:
-            raise RimclError(f"{existing} exists (use --overwrite to replace it)")
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise RimclError(f"cannot create output directory {out_dir}: {exc}") from None
-    stats = compute_stats(all_tables, config=config)
-    if figures:
-        # figures draw what the statistics computed; they never import this module
-        from rimcl.stats.figures import write_figures
+    # stats.json, stats.csv and figures/ are one set: an earlier run's are refused before
+    # any work (unless overwrite) and replaced whole, old figures included
+    with OutputSet(out_dir, overwrite=overwrite, owned=STATS_OWNED, inputs=paths) as outputs:
+        stats = compute_stats(all_tables, config=config)
+        if figures:
+            # figures draw what the statistics computed; they never import this module
+            from rimcl.stats.figures import write_figures
 
-        write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
-    write_json(stats_path, stats, overwrite=True)
-    write_tidy(out_dir / "stats.csv", stats)
+            write_figures(all_tables, stats, outputs.folder_path("figures"), overwrite=True)
+        write_json(outputs.path("stats.json"), stats, overwrite=True)
+        write_tidy(outputs.path("stats.csv"), stats)
     return stats

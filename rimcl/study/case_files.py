@@ -9,6 +9,7 @@ measured for the same scene in every key that changes the numbers.
 from pathlib import Path
 
 from rimcl.core.errors import RimclError, first_line
+from rimcl.core.fingerprint import describe_change, input_changes
 
 #: Scene keys that do not change the measurement: a study may resume with other values.
 RUN_ONLY_KEYS = (
@@ -25,19 +26,39 @@ RUN_ONLY_KEYS = (
 SCENE_RECORD = "study_scene"
 
 
+#: Section of a recorded scene holding the fingerprints of the files the study read
+#: (:func:`input_record`): not a scene key, so never in ``scene.toml``.
+INPUTS = "inputs"
+
+
+def input_record(study):
+    """The fingerprints (:func:`rimcl.core.fingerprint.fingerprint`) of the files a study
+    reads: ``{"field file": ...}`` (the scene's field file, else the shipped sample)."""
+    from rimcl.core.fingerprint import fingerprint
+    from rimcl.fields.sample import sample_path
+
+    return {"field file": fingerprint(study.field_path or sample_path())}
+
+
 def comparable_scene(study):
     """The scene of a :class:`~rimcl.scene.study_config.StudyConfig` without
-    :data:`RUN_ONLY_KEYS` (a fresh dict)."""
+    :data:`RUN_ONLY_KEYS`, with the fingerprints of its input files (:data:`INPUTS`; a
+    fresh dict): a result recorded with another content of the field file is not this
+    scene's."""
     trimmed = study.scene_record()
     for section, name in RUN_ONLY_KEYS:
         trimmed.get(section, {}).pop(name, None)
+    trimmed[INPUTS] = input_record(study)
     return trimmed
 
 
 def scene_differences(old, new):
-    """Lines ``section.key: old -> new`` for every key of ``new`` that ``old`` differs in."""
+    """Lines ``section.key: old -> new`` for every key of ``new`` that ``old`` differs in
+    (a changed input file: ``its field file changed since (…)``)."""
     return [
-        f"{section}.{name}: {old.get(section, {}).get(name)!r} -> {value!r}"
+        describe_change(name, old.get(section, {}).get(name), value)
+        if section == INPUTS
+        else f"{section}.{name}: {old.get(section, {}).get(name)!r} -> {value!r}"
         for section, table in new.items()
         for name, value in table.items()
         if old.get(section, {}).get(name) != value
@@ -83,6 +104,9 @@ def check_case_file(path, study, case):
     if not isinstance(recorded, dict):
         return "records no study scene (written by rimcl render or an older rimcl)"
     changes = scene_differences(recorded, comparable_scene(study))
+    inputs = input_changes(recorded.get(INPUTS), input_record(study))
+    if inputs:
+        return "; ".join(inputs) + ": its numbers are not this input's"
     if changes:
         shown = "; ".join(changes[:3]) + ("; ..." if len(changes) > 3 else "")
         return f"made for another scene ({shown})"

@@ -45,6 +45,7 @@ from pathlib import Path
 from rimcl import __version__
 from rimcl.core.atomic import atomic_path
 from rimcl.core.errors import RimclError
+from rimcl.core.outputs import OutputSet
 from rimcl.core.provenance import STUDY_MARKER
 from rimcl.scene.config import DEFAULT_PSF_SIGMA
 from rimcl.scene.load import load_scene
@@ -511,13 +512,13 @@ def physical_equivalents(delta_n_max, fluid):
     return {name: physical_equivalent(delta_n_max, f).text for name, f in fluids.items()}
 
 
-def _numerics(study, case, out_dir, versions):
+def _numerics(study, case, figures_dir, versions):
     """Run the Appendix A check, draw its figure, and return its numbers for stats.json."""
     from rimcl.ptv.numerics import numerical_convergence
     from rimcl.stats.figures_numerics import write_numerics_figure
 
     numerics = numerical_convergence(study, case)
-    write_numerics_figure(numerics, out_dir / "figures", versions)
+    write_numerics_figure(numerics, figures_dir, versions)
     runs = numerics["runs"]
     return {
         "case": numerics["case"],
@@ -547,11 +548,28 @@ def write_study_outputs(
     files, :func:`rimcl.study.sensitivity.measure_variants`); ``progress``: a progress bar
     over the steps (on a terminal).
 
+    The figures are one set (:class:`rimcl.core.outputs.OutputSet`): drawn into staging,
+    they replace the earlier ones whole (a figure this run does not draw is removed); with
+    ``figures`` False the earlier figures are removed.
+
     Returns
     -------
     dict
         The ``stats.json`` document.
     """
+    # the figures are one set: drawn into staging, they replace the earlier ones whole
+    figure_set = OutputSet(out_dir / "figures", overwrite=True, owned=("*",)) if figures else None
+    try:
+        return _study_outputs(
+            out_dir, study, case_files, figure_set, piv_files, progress, variant_files
+        )
+    finally:
+        if figure_set is not None:
+            figure_set.discard()  # a failed run: the earlier figures stay whole
+
+
+def _study_outputs(out_dir, study, case_files, figure_set, piv_files, progress, variant_files):
+    """:func:`write_study_outputs`, the figures drawn into ``figure_set`` (None: none)."""
     from rimcl.ptv.sweep import sweep_stats
     from rimcl.stats.document import check_cases, compute_stats
     from rimcl.stats.figures import write_figures
@@ -562,6 +580,8 @@ def write_study_outputs(
 
     config = {"scene": study.scene_record(), "study_dir": str(out_dir)}
     stats = {"cases": [], "config": config}
+    figures = figure_set is not None
+    figures_dir = figure_set.staging if figures else None
     # steps: each case file read, PTV statistics, PTV figures, PIV results, PIV figures,
     # the files written
     total = len(case_files) + 2 * bool(case_files) + 2 * bool(piv_files) + 1
@@ -586,11 +606,11 @@ def write_study_outputs(
             )
         bar.update()
         if figures:
-            write_figures(all_tables, stats, out_dir / "figures", overwrite=True)
+            write_figures(all_tables, stats, figures_dir, overwrite=True)
         bar.update()
         numerics_case = _numerics_case(study, [t.case for t in all_tables])
         if figures and numerics_case is not None:
-            stats["numerics"] = _numerics(study, numerics_case, out_dir, stats["versions"])
+            stats["numerics"] = _numerics(study, numerics_case, figures_dir, stats["versions"])
         multiples = sorted(set(study.dt_multiples) - {1})
         if multiples:
             by_dt = sweep_stats(
@@ -599,7 +619,7 @@ def write_study_outputs(
             if by_dt:
                 by_dt[float(all_tables[0].dt)] = stats
                 if figures:
-                    stats["dt_sweep"] = write_dt_sweep_figure(by_dt, out_dir / "figures")
+                    stats["dt_sweep"] = write_dt_sweep_figure(by_dt, figures_dir)
                 else:
                     stats["dt_sweep"] = dt_sweep_data(by_dt)
     if piv_files:
@@ -618,10 +638,14 @@ def write_study_outputs(
                 )
         bar.update()
         if figures:
-            write_piv_figures(piv_cases, out_dir / "figures", config=config, overwrite=True)
+            write_piv_figures(piv_cases, figures_dir, config=config, overwrite=True)
         bar.update()
     write_json(out_dir / "stats.json", stats, overwrite=True)
     write_tidy(out_dir / "stats.csv", stats)
+    if figure_set is not None:
+        figure_set.commit()
+    else:  # figures of earlier numbers: never beside these statistics
+        shutil.rmtree(out_dir / "figures", ignore_errors=True)
     _write_text(out_dir / "summary.md", summary_markdown(stats, study))
     bar.update()
     bar.close()
