@@ -146,3 +146,38 @@ def test_an_lpt_scene_names_its_field_relative_to_itself(tmp_path, monkeypatch):
     assert parsed.measure.tracers.count == 7
     with pytest.raises(RimclError, match=r"tracers\.margin \(set in the options"):
         load_lpt_scene(scene, {"tracers.margin": 0.2})
+
+
+def _options_by_key(*path):
+    """``{scene key: option}`` of a command, from the keys its options name in brackets."""
+    import re
+
+    import click
+
+    command = cli
+    for name in path:
+        command = command.get_command(click.Context(command), name)
+    found = {}
+    for param in command.params:
+        for key in re.findall(r"\[([a-z]+\.[a-z0-9_]+)", getattr(param, "help", None) or ""):
+            found.setdefault(key, param.opts[-1])
+    return found
+
+
+def test_the_same_key_has_the_same_option_everywhere():
+    commands = [("study",), ("render",), ("piv", "render"), ("piv", "sequence"), ("lpt", "run")]
+    options = {path: _options_by_key(*path) for path in commands}
+    for key in {key for found in options.values() for key in found}:
+        names = {found[key] for found in options.values() if key in found}
+        assert len(names) == 1, (key, names)
+    # the options a new user looked for (issue 32): study --time-s, lpt run --tracers
+    assert options[("study",)]["field.time_s"] == "--time-s"
+    assert options[("lpt", "run")]["tracers.count"] == "--tracers"
+    assert options[("lpt", "run")]["field.time_s"] == "--time-s"
+
+
+@pytest.mark.parametrize("command", [["study"], ["render"], ["piv", "render"]])
+def test_step_is_a_number_on_every_measuring_command(tmp_path, command):
+    result, files = _run(tmp_path, *command, "--step", "auto")
+    assert result.exit_code == 2 and "rimcl trace --step auto" in result.output
+    assert files == []
