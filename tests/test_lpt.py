@@ -278,7 +278,7 @@ def test_lpt_units_are_the_field_values_times_the_scales():
     assert block["velocity"]["x1"]["rms_refraction"]["mm_s"] is None
     assert block["velocity"]["x1"]["rms_refraction"]["px_frame"] == 2.0 * 4.0
     assert block["acceleration"]["x1"]["rms_refraction"] == {"field": 2.0, "m_s2": None}
-    assert "set field.time_s" in block["note"]
+    assert "--time-s (field.time_s) for mm/s" in block["note"]
 
 
 def test_soloff_terms_are_the_monomials():
