@@ -7,8 +7,8 @@ and ``[mie]``, checked by :func:`rimcl.scene.validate.validate_scene` against th
 :class:`rimcl.scene.study_config.StudyConfig` (the LPT sections:
 :class:`rimcl.scene.lpt_config.LptConfig`). Every key is optional; unknown keys are refused
 with the closest valid name, and so are keys set away from their defaults that LPT does not
-use (:mod:`rimcl.scene.usage`: ``field.box``, ``[camera]``, ...). Cameras are ``[[rig.cameras]]`` tables, or a preset
-(``rig.preset``) builds them from the field's size:
+use (:mod:`rimcl.scene.usage`: ``field.box``, ``[camera]``, ...). Cameras are
+``[[rig.cameras]]`` tables, or a preset (``rig.preset``) builds them from the field's size:
 
 - ``lpt-challenge``: four cameras at -30°, -10°, +10° and +30° from ``x1`` in the
   ``x1``–``x2`` plane (the first LPT challenge): 1920 x 1200 pixels of 10 µm,
