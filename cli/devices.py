@@ -27,7 +27,7 @@ def devices(as_json):
         "index",
         "platform",
         "device",
-        "OpenCL",
+        "driver",
         "CUs",
         "memory",
         "fp64",
@@ -43,7 +43,7 @@ def devices(as_json):
                 mark + entry["index"],
                 entry["platform"],
                 entry["device"],
-                entry["opencl_version"],
+                driver_text(entry),
                 str(entry["compute_units"]),
                 f"{entry['global_memory_mib']} MiB",
                 "yes" if entry["fp64"] else "no",
@@ -66,6 +66,19 @@ def devices(as_json):
         "(and of the image kernel where measured); measured once per device on first use "
         "(rimcl bench --tune measures again), 'rule' until then"
     )
+
+
+def driver_text(entry):
+    """The driver of a device entry: ``PoCL 3.1+debian, LLVM 15.0.6`` for PoCL (its
+    version decides the default device and the kernels' speed), else the driver version."""
+    import re
+
+    text = entry.get("platform_version", "")
+    pocl = re.search(r"PoCL (\S+)", text)
+    if pocl is None:
+        return entry["driver_version"]
+    llvm = re.search(r"LLVM ([\w.+-]+)", text)
+    return f"PoCL {pocl.group(1)}" + (f", LLVM {llvm.group(1)}" if llvm else "")
 
 
 def _shape_text(shape):

@@ -97,6 +97,32 @@ step_option = click.option(
     help="Integration step in t (dt = ds/n); default half a cell of arc; 'auto' calibrates "
     "a fixed step, 'adaptive' sizes each step by step doubling (see --tolerance).",
 )
+
+
+class _FixedStep(FiniteFloat):
+    """A fixed integration step (> 0); ``auto`` and ``adaptive`` are named as trace-only."""
+
+    def convert(self, value, param, ctx):
+        if value in ("auto", "adaptive"):
+            self.fail(
+                f"{value!r} calibrates the step of one trace (rimcl trace --step {value}); a "
+                "measurement takes a fixed step, the same in every frame and its reference "
+                "(default: half a cell)",
+                param,
+                ctx,
+            )
+        return super().convert(value, param, ctx)
+
+
+#: ``--step`` of the commands that measure (render, piv render/sequence, study): a number.
+measure_step_option = click.option(
+    "--step",
+    type=_FixedStep(0.0, open_minimum=True),
+    default=None,
+    metavar="DT",
+    help="Integration step in t (dt = ds/n) [integrator.step; default half a cell of arc]. "
+    "auto/adaptive: rimcl trace.",
+)
 tolerance_option = click.option(
     "--tolerance",
     type=POSITIVE,
@@ -215,9 +241,12 @@ def scene_options(func):
     return click.argument("scene_file", required=False, type=click.Path(dir_okay=False))(func)
 
 
-def command_scene(scene_file, scene_option, overrides, preset=None, velocity=True):
+def command_scene(scene_file, scene_option, overrides, command, preset=None, velocity=True):
     """The checked scene of a command: its scene file (or the default scene) with the
     command's options on top (``{"section.key": value}``; None: not given).
+
+    ``command``: its tag in :data:`rimcl.scene.usage.COMMANDS`; keys set that it does not
+    use are refused, or named in one note line (:func:`rimcl.scene.usage.check_use`).
 
     ``velocity``: the command moves tracers, so a sheet moved inside the shipped sample
     runs on its flow with full velocity (:func:`rimcl.scene.command.place_sheet`, said in
@@ -234,5 +263,7 @@ def command_scene(scene_file, scene_option, overrides, preset=None, velocity=Tru
     if field_path:
         # a field named on the command line is relative to where the command runs
         overrides["field.path"] = str(Path(field_path).resolve())
-    scene = load_scene(scene_file or scene_option, overrides, preset=preset)
+    scene = load_scene(
+        scene_file or scene_option, overrides, preset=preset, command=command, report=click.echo
+    )
     return place_sheet(scene, report=click.echo) if velocity else scene

@@ -16,10 +16,9 @@ from rimcl.cli.options import (
     field_option,
     handle_errors,
     k_rho_option,
+    measure_step_option,
     overwrite_option,
-    parse_step,
     scene_options,
-    step_option,
 )
 from rimcl.study.summary import number
 
@@ -296,7 +295,7 @@ _FRAME_OPTIONS = (
         type=click.Choice(["f32", "f32c", "f64"]),
         help="Accumulation precision [integrator.precision].",
     ),
-    step_option,
+    measure_step_option,
     device_option,
     click.option("--seed", type=INDEX, help="Random seed of the tracers [tracers.seed]."),
 )
@@ -341,10 +340,9 @@ def frame_configs(scene_file, scene_option, case, k_rho, peak_fraction, scaling,
         # --fan alone asks for the plane camera (--pupil-rays for the pupil), as in rimcl study
         options["camera"] = "plane" if fan is not None else "pupil"
     overrides = {RENDER_SCENE_KEYS[name]: value for name, value in options.items()}
-    parsed_step = parse_step(step)
-    if isinstance(parsed_step, float):
-        overrides["integrator.step"] = parsed_step
-    scene = command_scene(scene_file, scene_option, overrides)
+    if step is not None:
+        overrides["integrator.step"] = step
+    scene = command_scene(scene_file, scene_option, overrides, "piv")
     case, k_rho = command_case(scene, case, k_rho)
     piv_config, configs = configs_from_study(StudyConfig.from_scene(scene))
     piv_config = dataclasses.replace(
@@ -353,8 +351,6 @@ def frame_configs(scene_file, scene_option, case, k_rho, peak_fraction, scaling,
             piv_config.imaging, peak_fraction=peak_fraction, scaling=scaling
         ),
     )
-    if isinstance(parsed_step, str):
-        configs["integrator"] = dataclasses.replace(configs["integrator"], step=parsed_step)
     return scene, case, k_rho, piv_config, configs
 
 
@@ -491,6 +487,13 @@ def sequence(
     scene, case, k_rho, piv_config, configs = frame_configs(
         scene_file, scene_option, case, k_rho, peak_fraction, scaling, step, options
     )
+    # the shipped sample's size is known (the lens camera's default): m/s on any camera
+    length_m = scene["field"]["length_m"] or configs["camera"].length_m
+    if scene["field"]["time_s"] is not None and length_m is None:
+        raise RimclError(
+            "field.time_s (--time-s) gives the truth in m/s only with the field's size: "
+            "give --length-m (field.length_m) too"
+        )
     inputs = [scene["field"]["path"], scene_file, scene_option]
     with open_sequence_outputs(prefix, overwrite, inputs) as outputs:
         made = run_piv_sequence(
@@ -500,7 +503,7 @@ def sequence(
             piv=piv_config,
             frames=frames,
             seeds=seed_list,
-            length_m=scene["field"]["length_m"],
+            length_m=length_m,
             time_s=scene["field"]["time_s"],
             progress=True,
             **configs,

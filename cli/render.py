@@ -18,10 +18,9 @@ from rimcl.cli.options import (
     field_option,
     handle_errors,
     k_rho_option,
+    measure_step_option,
     overwrite_option,
-    parse_step,
     scene_options,
-    step_option,
 )
 
 #: ``rimcl render`` option -> scene key it overrides (the rest are the command's own)
@@ -48,6 +47,7 @@ SCENE_KEYS = {
     "max_window": "renderer.max_window",
     "bit_depth": "renderer.bit_depth",
     "precision": "integrator.precision",
+    "step": "integrator.step",
     "dt": "time.dt",
     "fit_window": "time.fit_window",
     "fit_order": "time.fit_order",
@@ -135,7 +135,7 @@ SCENE_KEYS = {
     type=click.Choice(["f32", "f32c", "f64"]),
     help="Accumulation precision [integrator.precision].",
 )
-@step_option
+@measure_step_option
 @click.option(
     "--frames",
     type=click.IntRange(1, 1000),
@@ -179,7 +179,6 @@ def render(
     case,
     k_rho,
     interp,
-    step,
     frames,
     threshold,
     frame_image,
@@ -213,16 +212,13 @@ def render(
     if frame_image is not None:
         check_frame_image(frame_image, overwrite)
     overrides = {SCENE_KEYS[name]: value for name, value in options.items()}
-    parsed_step = parse_step(step)
-    # what the scene's keys cannot hold (a study needs 3 frames, a fixed step and
+    # what the scene's keys cannot hold (a study needs 3 frames and a fixed
     # interpolation) is set on the configuration built from it
-    if isinstance(parsed_step, float):
-        overrides["integrator.step"] = parsed_step
     if interp not in (None, "auto"):
         overrides["integrator.interp"] = interp
     if frames is not None and frames >= 3:
         overrides["time.frames"] = frames
-    scene = command_scene(scene_file, scene_option, overrides)
+    scene = command_scene(scene_file, scene_option, overrides, "render")
     case, k_rho = command_case(scene, case, k_rho)
     config = MeasureConfig.from_scene(scene, case)
     config = dataclasses.replace(
@@ -234,7 +230,6 @@ def render(
         integrator=dataclasses.replace(
             config.integrator,
             interp="auto" if interp == "auto" else config.integrator.interp,
-            step=parsed_step if isinstance(parsed_step, str) else config.integrator.step,
         ),
         time=config.time if frames is None else dataclasses.replace(config.time, frames=frames),
         run=dataclasses.replace(config.run, frame_image=frame_image is not None),

@@ -5,6 +5,32 @@ import click
 from rimcl.cli.options import handle_errors, overwrite_option
 from rimcl.study.summary import number, percent
 
+#: What a user can change when a case keeps no tracer, by the flag that excluded them.
+_REMEDIES = {
+    "no_rays": "no ray reached the image: more rays per tracer (--fan, camera.pupil_rays)",
+    "below_threshold": "no pixel above the grey threshold: a lower threshold (--threshold, "
+    "cases.thresholds) or brighter tracers (sensor.peak_electrons)",
+    "split": "each image broke into pieces (the caustics of strong refraction): more rays per "
+    "tracer (a larger --fan; the paper's fan is 100) or the lens camera (--camera lens)",
+    "touches_edge": "images wider than their window: a larger renderer.max_window",
+    "rays_outside_window": "images wider than their window: a larger renderer.max_window",
+    "outside_field": "tracers left the field of view: a larger tracers.margin or fewer time.frames",
+}
+
+
+def no_tracer_hint(case):
+    """The line that says why a case kept no tracer and what to change, or None."""
+    if case.get("n_used") or not case.get("n_tracers"):
+        return None
+    counts = {name: n for name, n in (case.get("n_excluded") or {}).items() if n}
+    causes = sorted(counts, key=counts.get, reverse=True)
+    reasons = "; ".join(
+        f"{counts[name]} {name}: {_REMEDIES[name]}" for name in causes if name in _REMEDIES
+    )
+    return f"{'':>8}  {case['name']} kept no tracer, so its errors are n/a" + (
+        f" ({reasons})" if reasons else ""
+    )
+
 
 def echo_case_lines(stats):
     """One line per case: tracers used, position-error peak, and rms(ε)/rms(truth) of u3
@@ -18,6 +44,9 @@ def echo_case_lines(stats):
                 f"{case['name']:>8}  {g}Δn_max = {number(case['delta_n_max'])}: "
                 f"{case['n_used']}/{case['n_tracers']} tracers, errors n/a: {case['not_resolved']}"
             )
+            hint = no_tracer_hint(case)
+            if hint:
+                click.echo(hint)
             continue
         parts = []
         for group, component in (
@@ -50,6 +79,9 @@ def echo_case_lines(stats):
             f"{number(case['position_error_peak_over_L'])} L, rms(ε)/rms(truth): "
             + "; ".join(parts)
         )
+        hint = no_tracer_hint(case)
+        if hint:
+            click.echo(hint)
 
 
 @click.command()

@@ -13,6 +13,7 @@ from rimcl.cli.options import (
     device_option,
     engine_option,
     handle_errors,
+    measure_step_option,
     scene_options,
 )
 from rimcl.cli.piv import echo_piv_case_lines
@@ -61,6 +62,15 @@ def _case_list(_ctx, _param, value):
     callback=_case_list,
     help="Comma-separated cases, e.g. C0,C1,C4 or G=0.01 [scene: cases.names].",
 )
+@click.option(
+    "--length-m",
+    type=POSITIVE,
+    help="Metres per field length unit: outputs in µm and mm, and the lens camera "
+    "[field.length_m].",
+)
+@click.option(
+    "--time-s", type=POSITIVE, help="Seconds per field time unit: outputs in mm/s [field.time_s]."
+)
 @click.option("--tracers", type=COUNT, help="Tracers [tracers.count].")
 @click.option("--seed", type=INDEX, help="Random seed [tracers.seed].")
 @click.option(
@@ -80,7 +90,7 @@ def _case_list(_ctx, _param, value):
     type=click.Choice(["f32", "f32c", "f64"]),
     help="Accumulation precision [integrator.precision].",
 )
-@click.option("--step", type=POSITIVE, help="Integration step in t = s/n [integrator.step].")
+@measure_step_option
 @device_option
 @click.option(
     "--scheduler",
@@ -107,6 +117,8 @@ def study(
     no_figures,
     field_path,
     cases,
+    length_m,
+    time_s,
     tracers,
     seed,
     camera,
@@ -137,6 +149,8 @@ def study(
     overrides = {
         "field.path": field_path,
         "cases.names": cases,
+        "field.length_m": length_m,
+        "field.time_s": time_s,
         "tracers.count": tracers,
         "tracers.seed": seed,
         "camera.kind": camera,
@@ -153,7 +167,7 @@ def study(
         "run.sensitivity": sensitivity or None,  # a scene file may ask for it
     }
     study = StudyConfig.from_scene(
-        command_scene(scene_file, scene_option, overrides, preset=preset)
+        command_scene(scene_file, scene_option, overrides, "study", preset=preset)
     )
     if study.run.mode == "piv":
         ignored = [

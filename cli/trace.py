@@ -140,7 +140,7 @@ def trace(
         overrides["integrator.step"] = parsed_step
     if interp not in (None, "auto"):
         overrides["integrator.interp"] = interp
-    scene_table = command_scene(scene_file, scene_option, overrides, velocity=False)
+    scene_table = command_scene(scene_file, scene_option, overrides, "trace", velocity=False)
     field_keys, integrator = scene_table["field"], scene_table["integrator"]
     frame, length = field_keys["start_frame"], field_keys["depth"]
     tracers, seed = scene_table["tracers"]["count"], scene_table["tracers"]["seed"]

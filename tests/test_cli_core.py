@@ -28,6 +28,11 @@ def test_devices_lists_the_usable_device(device):
     assert any(entry["device"] == device.name.strip() and entry["usable"] for entry in found)
     table = CliRunner().invoke(cli, ["devices"])
     assert table.exit_code == 0 and "fp64" in table.output
+    # the PoCL version decides the default device: shown, not hidden in the platform string
+    pocl = [entry for entry in found if "PoCL" in entry["platform_version"]]
+    for entry in pocl:
+        version = entry["platform_version"].split("PoCL ", 1)[1].split()[0]
+        assert f"PoCL {version}, LLVM " in table.output
 
 
 def test_verify_passes_and_reports_convergence(device):

@@ -234,8 +234,8 @@ def test_scene_keys_are_checked():
         parse_lpt_scene({"illumination": {"thicknes": 1.0}})
     with pytest.raises(RimclError, match=r"rig\.preset in the scene must be one of"):
         parse_lpt_scene({"rig": {"preset": "lpt-chalenge"}})
-    with pytest.raises(RimclError, match="does not apply to LPT"):
-        parse_lpt_scene({"camera": {"kind": "lens"}})
+    with pytest.raises(RimclError, match=r"rimcl lpt does not use camera\.kind"):
+        parse_lpt_scene({"camera": {"kind": "plane"}})
     with pytest.raises(RimclError, match="needs position_mm"):
         parse_lpt_scene({"rig": {"cameras": [{"look_at_mm": [1, 2, 3]}]}})
     scene = parse_lpt_scene({})
@@ -278,7 +278,7 @@ def test_lpt_units_are_the_field_values_times_the_scales():
     assert block["velocity"]["x1"]["rms_refraction"]["mm_s"] is None
     assert block["velocity"]["x1"]["rms_refraction"]["px_frame"] == 2.0 * 4.0
     assert block["acceleration"]["x1"]["rms_refraction"] == {"field": 2.0, "m_s2": None}
-    assert "set field.time_s" in block["note"]
+    assert "--time-s (field.time_s) for mm/s" in block["note"]
 
 
 def test_soloff_terms_are_the_monomials():

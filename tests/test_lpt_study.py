@@ -98,16 +98,19 @@ def test_study_runs_lpt(tmp_path, lpt_flow):
         for extension in ("png", "pdf", "json"):
             assert (out / "figures" / f"{name}.{extension}").is_file()
     summary = (out / "summary.md").read_text()
-    assert "LPT study" in summary
+    # Markdown, as the PTV summary: a heading and a table per case, not a terminal dump
+    assert summary.startswith("# LPT study") and "```" not in summary
+    assert "## C3" in summary and "| position refraction rms (px) |" in summary
     # every headline number has its threshold band and verdict, in the file and the summary
     for case in cases.values():
         assert set(case["sensitivity"]["bands"]) == set(HEADLINES)
     for group in ("position", "velocity", "acceleration"):
-        assert summary.count(f"threshold ×½/×2 band, {group}: x1 ") == 2
+        assert summary.count(f"threshold ×½/×2 band, {group}**: x1 ") == 2
     assert (out / "lpt" / "lpt_case_C3.h5").is_file()
     again = CliRunner().invoke(cli, ["study", str(scene), "--out", str(out)])
     assert again.exit_code == 0, again.output
     assert "finished earlier, kept" in again.output
+    assert "0 cases measured, 2 kept" in again.output  # was "0 cases measured, 0 kept"
 
 
 @pytest.mark.parametrize("mode", ["lpt", "piv"])

@@ -93,6 +93,15 @@ def test_cli_writes_one_set_of_files_per_seed(box, tmp_path):
     for seed in (0, 1):
         assert (tmp_path / f"s_seed{seed}_001.tif").exists()
         assert (tmp_path / f"s_seed{seed}_truth.h5").exists()
+    with h5py.File(tmp_path / "s_seed0_truth.h5") as h5:
+        # no scales, no m/s: the units text names only what is written
+        assert "u_ms" not in h5["truth"] and "u_ms" not in h5.attrs["units"]
+    # a time scale without the field's size cannot give m/s: refused, not dropped
+    lost = runner.invoke(
+        cli, [*base, "--frames", "2", "--time-s", "0.5", "-o", str(tmp_path / "t")]
+    )
+    assert lost.exit_code == 1 and "give --length-m (field.length_m)" in lost.output
+    assert not list(tmp_path.glob("t_*"))
 
 
 def test_cli_takes_a_scene_file_as_piv_render_does(box, tmp_path):

@@ -220,3 +220,19 @@ def test_a_study_folder_that_is_a_symbolic_link_is_refused(device, tmp_path, fol
         run_study(tiny(device, **{"run.mode": "both"}), out, figures=False)
     assert stale.read_bytes() == b"not the study's" and sorted(outside.iterdir()) == [stale]
     assert not (out / "scene.toml").exists() and not (out / MARKER).exists()
+
+
+def test_every_statistics_stage_says_when_it_starts(finished, tmp_path):
+    """No silent stage: the statistics and the Δt sweep each start with a line (a user saw
+    nothing for 86 s)."""
+    from rimcl.study.run import write_study_outputs
+
+    scene, out = finished
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    lines = []
+    files = sorted((copy / "cases").glob("*.h5"))
+    study = StudyConfig.from_scene(scene)
+    write_study_outputs(copy, study, files, figures=False, report=lines.append)
+    assert lines[0] == "statistics of 3 case file(s), with bootstrap intervals"
+    assert lines[1] == "Δt sweep: statistics at 2 Δt, 3 Δt, 4 Δt"

@@ -3,7 +3,8 @@
 At the start of every build this writes, under ``docs/_generated/`` (not committed):
 
 - ``scene-keys.md``: one table per scene section, from :data:`rimcl.scene.load.SCENE_KEYS`
-  (the same table that ``rimcl study --print-default-scene`` prints);
+  (the same table that ``rimcl study --print-default-scene`` prints), each key with the
+  commands that use it (:func:`rimcl.scene.usage.users`);
 - ``default-scene.toml``: that printed default scene, verbatim;
 - ``public-api.md``: the names ``import rimcl`` offers (``rimcl.__all__``), each linked to
   the module that defines it.
@@ -44,15 +45,28 @@ def scene_keys_markdown():
     lines = []
     for section in SECTIONS:
         lines += [f"({_anchor(section)})=", f"## `[{section}]`", ""]
-        lines += ["| key | default | meaning |", "|---|---|---|"]
+        lines += ["| key | default | meaning | used by |", "|---|---|---|---|"]
         for key in (k for k in SCENE_KEYS if k.section == section):
             meaning = key.doc
             if key.choices:
                 meaning += " (one of: " + ", ".join(f"`{c}`" for c in key.choices) + ")"
             meaning += _limit(key)
-            lines.append(f"| `{key.dotted}` | {_cell(_default(key))} | {_cell(meaning)} |")
+            lines.append(
+                f"| `{key.dotted}` | {_cell(_default(key))} | {_cell(meaning)} | {_used_by(key)} |"
+            )
         lines.append("")
     return "\n".join(lines)
+
+
+def _used_by(key):
+    """The commands using a key (:func:`rimcl.scene.usage.users`), short, and the cameras."""
+    from rimcl.scene.usage import CAMERA_KINDS, users
+
+    short = {"study": "study", "render": "render", "piv": "piv", "trace": "trace", "lpt": "lpt"}
+    tags = users(key)
+    shown = "all" if len(tags) == len(short) else ", ".join(t for t in short if t in tags)
+    kinds = CAMERA_KINDS.get(key.dotted)
+    return shown + (f" ({', '.join(kinds)} camera)" if kinds else "")
 
 
 def _limit(key):

@@ -259,6 +259,7 @@ def describe_device(device):
         "type": cl.device_type.to_string(device.type),
         "opencl_version": device.version.strip(),
         "driver_version": device.driver_version.strip(),
+        "platform_version": device.platform.version.strip(),
         "compute_units": int(device.max_compute_units),
         "fp64": has_fp64(device),
         "images": bool(device.image_support),

@@ -6,8 +6,9 @@ and ``[mie]``, checked by :func:`rimcl.scene.validate.validate_scene` against th
 (:mod:`rimcl.scene.keys_lpt` holds the LPT ones) and parsed once into a
 :class:`rimcl.scene.study_config.StudyConfig` (the LPT sections:
 :class:`rimcl.scene.lpt_config.LptConfig`). Every key is optional; unknown keys are refused
-with the closest valid name. Cameras are ``[[rig.cameras]]`` tables, or a preset
-(``rig.preset``) builds them from the field's size:
+with the closest valid name, and so are keys set away from their defaults that LPT does not
+use (:mod:`rimcl.scene.usage`: ``field.box``, ``[camera]``, ...). Cameras are
+``[[rig.cameras]]`` tables, or a preset (``rig.preset``) builds them from the field's size:
 
 - ``lpt-challenge``: four cameras at -30°, -10°, +10° and +30° from ``x1`` in the
   ``x1``–``x2`` plane (the first LPT challenge): 1920 x 1200 pixels of 10 µm,
@@ -31,7 +32,6 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.scene.lpt_config import CameraSpec, IlluminationConfig, LptSettings, RigConfig
 from rimcl.scene.study_config import StudyConfig
-from rimcl.scene.validate import suggest
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -50,18 +50,6 @@ __all__ = [
     "preset_cameras",
 ]
 
-#: Sections of the study's scene that an LPT scene uses (checked by the study's loader).
-STUDY_SECTIONS = (
-    "field",
-    "cases",
-    "tracers",
-    "time",
-    "integrator",
-    "run",
-    "fluid",
-    "sensor",
-    "mie",
-)
 #: Cases an LPT scene runs when ``cases.names`` is not given.
 DEFAULT_CASES = ("C1", "C2", "C3")
 #: The first LPT challenge's camera angles (degrees from x1, towards +x2).
@@ -97,8 +85,12 @@ class LptScene:
         return self.study.shared
 
 
-def parse_lpt_scene(raw, where="the scene"):
+def parse_lpt_scene(raw, where="the scene", given=None):
     """Check an LPT scene mapping (as read from TOML) and fill in the defaults.
+
+    Keys set away from their defaults that LPT does not use (the planar measurement's:
+    ``[camera]``, ``[renderer]``, ``[piv]``, ``field.box``, ``tracers.margin``, ...) are
+    refused (:func:`rimcl.scene.usage.check_use`).
 
     Parameters
     ----------
@@ -106,45 +98,71 @@ def parse_lpt_scene(raw, where="the scene"):
         ``{section: {key: value}}``.
     where : str
         Named in error messages.
+    given : dict of str to str, optional
+        Where each key of ``raw`` was set (``{"tracers.count": "the options"}``); the
+        keys not named were set in ``where``.
 
     Returns
     -------
     LptScene
     """
     from rimcl.scene.load import field_scales
+    from rimcl.scene.usage import check_use
     from rimcl.scene.validate import validate_scene
 
-    for section in raw:
-        if section not in STUDY_SECTIONS and section not in ("rig", "illumination", "lpt"):
-            known = (*STUDY_SECTIONS, "rig", "illumination", "lpt")
-            raise RimclError(
-                f"section [{section}] in {where} does not apply to LPT (its sections: "
-                f"{', '.join(known)}){suggest(section, known)}"
-            )
     cases_given = "names" in raw.get("cases", {})
+    scene = validate_scene(dict(raw), where)
+    sources = {
+        f"{section}.{name}": where
+        for section, table in raw.items()
+        if isinstance(table, dict)
+        for name in table
+    }
+    check_use(scene, {**sources, **(given or {})}, "lpt")
     # field.time_s from field.velocity_m_s or the field file, as for a study
-    scene = field_scales(validate_scene(dict(raw), where), where)
+    scene = field_scales(scene, where)
     if not cases_given:
         scene["cases"]["names"] = list(DEFAULT_CASES)
     return LptScene(StudyConfig.from_scene(scene, where))
 
 
-def load_lpt_scene(path=None):
-    """Read and check an LPT scene file (the defaults when ``path`` is None)."""
-    if path is None:
-        return parse_lpt_scene({}, "the default LPT scene")
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise RimclError(f"cannot read scene file {path}: {exc.strerror}") from None
-    except UnicodeDecodeError:
-        raise RimclError(f"scene file {path} is not text (a TOML scene is UTF-8 text)") from None
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RimclError(f"{path} is not valid TOML: {exc}") from None
-    return parse_lpt_scene(raw, str(path))
+def load_lpt_scene(path=None, overrides=None):
+    """Read and check an LPT scene file (the defaults when ``path`` is None).
+
+    ``overrides``: ``{"section.key": value}`` on top (command-line options; None values
+    are ignored); a relative ``field.path`` of the file is relative to the file.
+    """
+    raw, where = {}, "the default LPT scene"
+    if path is not None:
+        path = Path(path)
+        where = str(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise RimclError(f"cannot read scene file {path}: {exc.strerror}") from None
+        except UnicodeDecodeError:
+            raise RimclError(
+                f"scene file {path} is not text (a TOML scene is UTF-8 text)"
+            ) from None
+        try:
+            raw = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise RimclError(f"{path} is not valid TOML: {exc}") from None
+        field = raw.get("field")
+        if isinstance(field, dict) and isinstance(field.get("path"), str) and field["path"]:
+            # a scene names its field relative to itself, as rimcl study reads it
+            if not Path(field["path"]).is_absolute():
+                field["path"] = str((path.parent / field["path"]).resolve())
+    given = {}
+    for dotted, value in (overrides or {}).items():
+        if value is None:
+            continue
+        section, name = dotted.split(".", 1)
+        table = raw.setdefault(section, {})
+        if isinstance(table, dict):
+            table[name] = value
+            given[dotted] = "the options"
+    return parse_lpt_scene(raw, where, given)
 
 
 def preset_cameras(preset, *, look_at, x_end, width, length_m, fluid_index, rig):

@@ -788,7 +788,7 @@ def _physical_line(units):
     """The refraction errors of velocity and acceleration in mm/s and m/s², or the note
     that says they are in field units."""
     if not units or units["scales"]["time_s"] is None:
-        return "velocity and acceleration in field units: set field.time_s for mm/s and m/s²"
+        return "velocity and acceleration in field units: --time-s (field.time_s) for mm/s, m/s²"
     parts = []
     for group, key, unit in (("velocity", "mm_s", "mm/s"), ("acceleration", "m_s2", "m/s²")):
         values = "/".join(_cell(units[group][k]["rms_refraction"][key]) for k in COMPONENTS)

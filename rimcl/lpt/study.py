@@ -88,6 +88,64 @@ def run_lpt_study(study, out_dir, *, force=False, figures=True, report=None):
         "lpt": document,
     }
     write_json(Path(out_dir) / "stats.json", stats, True)
-    summary = ["# LPT study", "", "```", *summary_lines(document), "```", ""]
-    (Path(out_dir) / "summary.md").write_text("\n".join(summary), encoding="utf-8")
+    (Path(out_dir) / "summary.md").write_text(summary_markdown(document), encoding="utf-8")
     return stats, ran
+
+
+#: The lines of :func:`rimcl.lpt.run.summary_lines` that :func:`summary_markdown` tabulates.
+_TABULATED = ("position refraction rms", "velocity rms", "acceleration rms")
+
+
+def summary_markdown(document):
+    """The LPT study's ``summary.md``: per case a heading, a table of the refraction errors
+    per component (position in px, velocity and acceleration as rms(ε)/rms(truth) with the
+    baseline) and the other results as a list.
+
+    Parameters
+    ----------
+    document : dict
+        ``lpt_stats.json`` (:func:`rimcl.lpt.run.run_lpt`).
+
+    Returns
+    -------
+    str
+    """
+    from rimcl.lpt.run import COMPONENTS
+
+    def _cell(value):
+        return "n/a" if value is None else f"{value:.3g}"
+
+    text = summary_lines(document)
+    lines = [
+        "# LPT study",
+        "",
+        f"{text[0]}; configuration `scene.toml`, every number `stats.json`.",
+    ]
+    cases = iter(document["cases"].items())
+    for line in text[1:]:
+        if not line.startswith("  "):
+            name, case = next(cases)
+            lines += ["", f"## {name}", "", line.partition(": ")[2] + ".", ""]
+            lines += ["| | " + " | ".join(COMPONENTS) + " |", "|---|" + "---|" * len(COMPONENTS)]
+            position = case["position"]
+            lines.append(
+                "| position refraction rms (px) | "
+                + " | ".join(_cell(position[k]["refraction_rms_px"]) for k in COMPONENTS)
+                + " |"
+            )
+            for label in ("velocity", "acceleration"):
+                block = case[label]
+                lines.append(
+                    f"| {label} rms(ε)/rms(truth) (baseline) | "
+                    + " | ".join(
+                        f"{_cell(block[k]['refraction']['rms_normalized'])} "
+                        f"({_cell(block[k]['baseline']['rms_normalized'])})"
+                        for k in COMPONENTS
+                    )
+                    + " |"
+                )
+            lines.append("")
+        elif not line.strip().startswith(_TABULATED):
+            label, colon, values = line.strip().partition(": ")
+            lines.append(f"- **{label}**: {values}" if colon else f"- {label}")
+    return "\n".join(lines).replace("\n\n\n", "\n\n") + "\n"

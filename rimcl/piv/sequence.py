@@ -305,10 +305,11 @@ def write_piv_sequence(outputs, sequence):
     with atomic_path(truth) as tmp, h5py.File(tmp, "w") as h5:
         h5.attrs["rimcl_schema"] = SEQUENCE_SCHEMA
         h5.attrs["schema_version"] = 2  # 2: (id, frame) particles, named dimensions
+        # u_ms, v_ms only where both scales are known (named only then)
+        in_m_s = "; u_ms, v_ms in m/s" if sequence.truth_ms is not None else ""
         h5.attrs["units"] = (
             "times in field time units; positions in field length units; col, row, dx, dy "
-            "in pixels (dx, dy per frame); u_ms, v_ms in m/s; x along image columns, y "
-            "along image rows"
+            f"in pixels (dx, dy per frame){in_m_s}; x along image columns, y along image rows"
         )
         # named dimensions and units on every dataset, for xarray.open_dataset(path, group=...)
         frames = len(sequence.times)

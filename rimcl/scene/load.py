@@ -110,7 +110,7 @@ PRESETS = {
 }
 
 
-def load_scene(path=None, overrides=None, preset=None):
+def load_scene(path=None, overrides=None, preset=None, command=None, report=None):
     """Read a scene file (or the defaults), apply overrides, check everything.
 
     Parameters
@@ -122,6 +122,12 @@ def load_scene(path=None, overrides=None, preset=None):
         are ignored.
     preset : str, optional
         A name of :data:`PRESETS`, applied under the file's keys.
+    command : str, optional
+        The command the scene is for (a tag of :data:`rimcl.scene.usage.COMMANDS`): keys set
+        that it does not use are refused or noted (:func:`rimcl.scene.usage.check_use`).
+        None: no such check (a study reading back its own ``scene.toml``).
+    report : callable, optional
+        Given the note of :func:`~rimcl.scene.usage.check_use`, if any.
 
     Returns
     -------
@@ -130,11 +136,13 @@ def load_scene(path=None, overrides=None, preset=None):
     """
     raw = {}
     where = "the default scene"
+    given = {}  # dotted key -> where it was set
     if preset is not None:
         if preset not in PRESETS:
             raise RimclError(f"unknown preset {preset!r}; choose from {', '.join(PRESETS)}")
         raw = copy.deepcopy(PRESETS[preset])
         where = f"the {preset} preset"
+        given.update(_dotted(raw, f"--preset {preset}"))
     if path is not None:
         path = Path(path)
         where = str(path)
@@ -150,6 +158,7 @@ def load_scene(path=None, overrides=None, preset=None):
             from_file = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise RimclError(f"{path} is not valid TOML: {exc}") from None
+        given.update(_dotted(from_file, path.name))
         for section, table in from_file.items():
             if isinstance(table, dict) and isinstance(raw.get(section), dict):
                 raw[section] = {**raw[section], **table}
@@ -166,6 +175,7 @@ def load_scene(path=None, overrides=None, preset=None):
             continue
         section, name = dotted.split(".", 1)
         raw.setdefault(section, {})[name] = value
+        given[dotted] = "the options"
     camera = raw.get("camera")
     if isinstance(camera, dict) and "fan" in camera and "kind" not in camera:
         # a fan size and no camera asks for the paper's fan (--fan N), not the default lens
@@ -178,7 +188,24 @@ def load_scene(path=None, overrides=None, preset=None):
         for case in set(preset_thresholds) - set(names):
             if thresholds.get(case) == preset_thresholds[case]:
                 del thresholds[case]
-    return field_scales(validate_scene(raw, where), where)
+    scene = validate_scene(raw, where)
+    if command is not None:
+        from rimcl.scene.usage import check_use
+
+        note = check_use(scene, given, command)
+        if note and report is not None:
+            report(note)
+    return field_scales(scene, where)
+
+
+def _dotted(raw, source):
+    """``{"section.key": source}`` for every key of a TOML mapping."""
+    return {
+        f"{section}.{name}": source
+        for section, table in raw.items()
+        if isinstance(table, dict)
+        for name in table
+    }
 
 
 def field_scales(scene, where):

@@ -163,7 +163,7 @@ def scale_note(factors):
             "for µm, mm/s and m/s²"
         )
     if factors["time_s"] is None:
-        return "lengths in µm and px; velocities in field units: set field.time_s for mm/s"
+        return "lengths in µm and px; velocities in field units: --time-s (field.time_s) for mm/s"
     return "physical values = normalised values × scales"
 
 

@@ -402,8 +402,9 @@ def run_study(
 
             scene_file.settle()
             stats, ran = run_lpt_study(study, out_dir, force=force, figures=figures, report=say)
+            kept = [] if ran else [f"lpt/{name}" for name in stats["lpt"]["cases"]]
             elapsed = time.perf_counter() - started
-            return StudyResult(out_dir, stats, ran, [], {}, True, elapsed)
+            return StudyResult(out_dir, stats, ran, kept, {}, True, elapsed)
         ran, skipped, seconds = [], [], {}
         todo = cases
         if scheduler and cases:
@@ -430,7 +431,10 @@ def run_study(
                 skipped.append(name)
                 say(f"{step}: finished earlier, kept ({path})")
                 continue
-            say(f"{step}: " + (f"{path.name} {reason}; measuring again" if reason else "measuring"))
+            what = f"{path.name} {reason}; measuring again" if reason else "measuring"
+            if not ran:  # the longest silence of a study without progress bars
+                what += " (the first case also builds the kernels and reference images)"
+            say(f"{step}: {what}")
             case_start = time.perf_counter()
             config = study.measure(name)
             result = run_render(
@@ -483,9 +487,8 @@ def run_study(
                 return StudyResult(
                     out_dir, stats, ran, skipped, seconds, False, time.perf_counter() - started
                 )
-        say("statistics and figures" if figures else "statistics")
         stats = write_study_outputs(
-            out_dir, study, case_files, figures, piv_files, progress, variant_files
+            out_dir, study, case_files, figures, piv_files, progress, variant_files, report=say
         )
     return StudyResult(out_dir, stats, ran, skipped, seconds, True, time.perf_counter() - started)
 
@@ -541,12 +544,19 @@ def _numerics_case(study, names):
 
 
 def write_study_outputs(
-    out_dir, study, case_files, figures=True, piv_files=(), progress=False, variant_files=None
+    out_dir,
+    study,
+    case_files,
+    figures=True,
+    piv_files=(),
+    progress=False,
+    variant_files=None,
+    report=None,
 ):
     """``stats.json``, the figures and ``summary.md`` (last) of finished case files
     (PTV render files, PIV case files; ``variant_files``: the sensitivity variants' render
     files, :func:`rimcl.study.sensitivity.measure_variants`); ``progress``: a progress bar
-    over the steps (on a terminal).
+    over the steps (on a terminal); ``report``: told one line as each stage starts.
 
     The figures are one set (:class:`rimcl.core.outputs.OutputSet`): drawn into staging,
     they replace the earlier ones whole (a figure this run does not draw is removed); with
@@ -586,7 +596,9 @@ def _study_outputs(out_dir, study, case_files, figure_set, piv_files, progress, 
     # the files written
     total = len(case_files) + 2 * bool(case_files) + 2 * bool(piv_files) + 1
     bar = _steps_bar(progress, total)
+    say = report or (lambda line: None)
     if case_files:
+        say(f"statistics of {len(case_files)} case file(s), with bootstrap intervals")
         all_tables = []
         for path in case_files:
             tables = load_render(path)
@@ -606,13 +618,16 @@ def _study_outputs(out_dir, study, case_files, figure_set, piv_files, progress, 
             )
         bar.update()
         if figures:
+            say("figures")
             write_figures(all_tables, stats, figures_dir, overwrite=True)
         bar.update()
         numerics_case = _numerics_case(study, [t.case for t in all_tables])
         if figures and numerics_case is not None:
+            say(f"numerics check on {numerics_case}")
             stats["numerics"] = _numerics(study, numerics_case, figures_dir, stats["versions"])
         multiples = sorted(set(study.dt_multiples) - {1})
         if multiples:
+            say(f"Δt sweep: statistics at {', '.join(f'{m} Δt' for m in multiples)}")
             by_dt = sweep_stats(
                 all_tables, multiples, study.shared.time, lambda t: compute_stats(t, config=config)
             )
@@ -628,6 +643,7 @@ def _study_outputs(out_dir, study, case_files, figure_set, piv_files, progress, 
         from rimcl.piv.study import add_study_results
         from rimcl.study.answer import piv_units
 
+        say(f"PIV statistics of {len(piv_files)} case file(s)" + (", figures" if figures else ""))
         piv_cases = add_study_results(stats, piv_files)
         for case in stats["cases"]:
             if "piv_vs_ptv" in case:  # what each measured with: like for like or not
