@@ -571,14 +571,16 @@ def write_study_outputs(
     figure_set = OutputSet(out_dir / "figures", overwrite=True, owned=("*",)) if figures else None
     try:
         return _study_outputs(
-            out_dir, study, case_files, figure_set, piv_files, progress, variant_files
+            out_dir, study, case_files, figure_set, piv_files, progress, variant_files, report
         )
     finally:
         if figure_set is not None:
             figure_set.discard()  # a failed run: the earlier figures stay whole
 
 
-def _study_outputs(out_dir, study, case_files, figure_set, piv_files, progress, variant_files):
+def _study_outputs(
+    out_dir, study, case_files, figure_set, piv_files, progress, variant_files, report
+):
     """:func:`write_study_outputs`, the figures drawn into ``figure_set`` (None: none)."""
     from rimcl.ptv.sweep import sweep_stats
     from rimcl.stats.document import check_cases, compute_stats
