@@ -17,27 +17,35 @@ def echo_case_lines(stats):
                 f"{case['n_used']}/{case['n_tracers']} tracers, errors n/a: {case['not_resolved']}"
             )
             continue
-        parts = []
-        for group, component in (
-            ("velocity_fit", "u3"),
-            ("velocity", "u3"),
-            ("acceleration_fit", "a3"),
-            ("acceleration", "a3"),
-        ):
-            if group not in case or any(p.startswith(component) for p in parts):
-                continue
-            summary = case[group][component]
-            interval = summary.get("ci95", {}).get("rms_normalized")
-            shown = percent(summary["rms_normalized"])
-            if interval is not None and None not in interval:
-                shown += f" [{percent(interval[0])}, {percent(interval[1])}]"
-            parts.append(f"{component} {shown}" + (" (fit)" if group.endswith("_fit") else ""))
+        parts, floor = _headline_parts(case), _headline_parts(case.get("noise_floor"))
         click.echo(
             f"{case['name']:>8}  {g}Δn_max = {number(case['delta_n_max'])}: "
             f"{case['n_used']}/{case['n_tracers']} tracers, |ε_x| peak "
             f"{number(case['position_error_peak_over_L'])} L, rms(ε)/rms(truth): "
             + ", ".join(parts)
+            + (f"; noise floor (camera alone): {', '.join(floor)}" if floor else "")
         )
+
+
+def _headline_parts(block):
+    """``u3 0.1 % [lo, hi] (fit)`` and the same for ``a3`` of a stats block (a case, or its
+    ``noise_floor``), fitted where the tracks allow; [] for no block."""
+    parts = []
+    for group, component in (
+        ("velocity_fit", "u3"),
+        ("velocity", "u3"),
+        ("acceleration_fit", "a3"),
+        ("acceleration", "a3"),
+    ):
+        if group not in (block or {}) or any(p.startswith(component) for p in parts):
+            continue
+        summary = block[group][component]
+        interval = summary.get("ci95", {}).get("rms_normalized")
+        shown = percent(summary["rms_normalized"])
+        if interval is not None and None not in interval:
+            shown += f" [{percent(interval[0])}, {percent(interval[1])}]"
+        parts.append(f"{component} {shown}" + (" (fit)" if group.endswith("_fit") else ""))
+    return parts
 
 
 @click.command()
