@@ -78,6 +78,9 @@ def test_the_noise_floor_is_two_independent_exposures(noisy):
     assert found["rms_normalized"] == pytest.approx(expected["rms_normalized"], rel=1e-12)
     assert found["rms_normalized"] > 0
     assert floor["acceleration_fit"]["a3"]["rms_normalized"] > 0
+    # in the units block (and the answer) beside refraction, which is exactly 0
+    units = case["units"]["velocity"]["u3"]
+    assert units["rms_refraction"]["field"] == 0 and units["rms_noise_floor"]["field"] > 0
 
 
 def test_a_noiseless_camera_has_a_zero_floor(tmp_path_factory, device):
