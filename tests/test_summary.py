@@ -85,7 +85,8 @@ def test_the_paper_table_gives_both_error_definitions(tmp_path, scene):
     write_render_file(path, n_tracers=40)
     stats = compute_stats([load_render(path)])
     case = stats["cases"][0]
-    assert set(stats["config"]["error_definitions"]) == {"refraction", "against_truth", "baseline"}
+    definitions = stats["config"]["error_definitions"]
+    assert set(definitions) == {"refraction", "against_truth", "baseline", "noise_floor"}
     truth = case["against_truth"]["velocity"]["u3"]
     refraction = case["velocity"]["u3"]
     assert truth["rms_normalized"] != refraction["rms_normalized"]
