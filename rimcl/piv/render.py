@@ -374,8 +374,9 @@ def run_piv_render(
         camera's reference depends on the case's mean index).
     sensor : rimcl.scene.config.SensorConfig, optional
         The camera's sensor (default: deterministic, ``imaging.bit_depth`` bits); its seed
-        defaults to ``piv.seed``. Noise draws: the uniform-medium frames pass 0, the
-        field's pass 1, exposure A frame 0, B frame 1.
+        defaults to ``piv.seed``. Noise draws: the uniform-medium frames and the field's
+        share pass 0 (common random numbers), the noise floor's second uniform pair pass 1;
+        exposure A frame 0, B frame 1.
     mie : rimcl.scene.config.MieConfig, optional
         Mie weights of the rays (default: off).
     progress : bool
