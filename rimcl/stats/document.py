@@ -109,8 +109,9 @@ def budget_verdict(case):
     dict or None
         ``quantity`` (the statistic compared: ``velocity.<u3>.rms_normalized``), its
         ``optics``, ``imaging``, ``total`` (refraction), ``noise_floor`` (None without the
-        block) and ``baseline`` values; ``dominant`` (the largest of optics, imaging,
-        noise floor and baseline); ``refraction_over_floor`` and
+        block) and ``baseline`` values; ``dominant`` (the largest of refraction, noise
+        floor and baseline, refraction named by its larger part, optics or imaging);
+        ``refraction_over_floor`` and
         ``refraction_over_baseline`` (None where the other term is missing or 0);
         ``resolved`` (False where refraction is exactly 0: nothing measured); ``text``, one
         line for a reader naming each term. ``None`` without the blocks or the numbers.
@@ -126,9 +127,14 @@ def budget_verdict(case):
     if any(value is None for value in parts.values()):
         return None
     parts["noise_floor"] = _u3(case.get("noise_floor"))
-    contenders = {name: parts[name] for name in PART_NAMES if parts[name] is not None}
-    dominant = max(contenders, key=contenders.get)
     total = parts["total"]
+    # refraction (its larger part speaking for it) against the two terms that are not
+    # refraction: the noise floor and the baseline
+    contenders = {
+        "optics" if parts["optics"] >= parts["imaging"] else "imaging": total,
+        **{name: parts[name] for name in ("noise_floor", "baseline") if parts[name] is not None},
+    }
+    dominant = max(contenders, key=contenders.get)
     words = [f"{case['name']}: {PART_NAMES[dominant]} dominates rms(ε_u3)/rms(u3)"]
     if total == 0:
         words.append("refraction not resolved (exactly 0: measured and reference images agree)")
