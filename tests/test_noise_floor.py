@@ -51,6 +51,7 @@ def test_a_uniform_medium_has_no_refraction_error_on_a_noisy_camera(noisy):
     verdict = case["budget_verdict"]
     assert verdict["total"] == 0 and not verdict["resolved"]
     assert "refraction not resolved" in verdict["text"]
+    assert f"the noise floor {100 * verdict['noise_floor']:.3g} %" in verdict["text"]
     assert verdict["noise_floor"] > 0 and verdict["dominant"] in ("noise_floor", "baseline")
 
 

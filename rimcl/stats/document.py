@@ -138,6 +138,9 @@ def budget_verdict(case):
     words = [f"{case['name']}: {PART_NAMES[dominant]} dominates rms(ε_u3)/rms(u3)"]
     if total == 0:
         words.append("refraction not resolved (exactly 0: measured and reference images agree)")
+        for name in ("noise_floor", "baseline"):
+            if parts[name] is not None:
+                words.append(f"the {PART_NAMES[name]} {100 * parts[name]:.3g} %")
     else:
         words.append(f"refraction {100 * total:.3g} %")
         for name in ("noise_floor", "baseline"):
