@@ -48,40 +48,48 @@ def echo_case_lines(stats):
             if hint:
                 click.echo(hint)
             continue
-        parts = []
-        for group, component in (
-            ("velocity_fit", "u3"),
-            ("velocity", "u3"),
-            ("acceleration_fit", "a3"),
-            ("acceleration", "a3"),
-        ):
-            if group not in case or any(p.startswith(component) for p in parts):
-                continue
-            summary = case[group][component]
-            interval = summary.get("ci95", {}).get("rms_normalized")
-            shown = percent(summary["rms_normalized"])
-            if interval is not None and None not in interval:
-                shown += f" [{percent(interval[0])}, {percent(interval[1])}]"
-            shown += " (fit)" if group.endswith("_fit") else ""
-            convergence = case.get("convergence", {})
-            path = f"{group}.{component}.rms_normalized"
-            if path in convergence.get("not_converged", []):
-                # a few tracers or a heavy tail carry it: the robust numbers beside it
-                reasons = ", ".join(convergence.get("reasons", {}).get(path, []))
-                shown += (
-                    f" † not converged ({reasons}); median ε/{component} "
-                    f"{percent(summary['median'])}, IQR {percent(summary['iqr'])}"
-                )
-            parts.append(f"{component} {shown}")
+        parts, floor = _headline_parts(case), _headline_parts(case.get("noise_floor"))
         click.echo(
             f"{case['name']:>8}  {g}Δn_max = {number(case['delta_n_max'])}: "
             f"{case['n_used']}/{case['n_tracers']} tracers, |ε_x| peak "
             f"{number(case['position_error_peak_over_L'])} L, rms(ε)/rms(truth): "
             + "; ".join(parts)
+            + (f"; noise floor (camera alone): {'; '.join(floor)}" if floor else "")
         )
         hint = no_tracer_hint(case)
         if hint:
             click.echo(hint)
+
+
+def _headline_parts(block):
+    """``u3 0.1 % [lo, hi] (fit)`` and the same for ``a3`` of a stats block (a case, or its
+    ``noise_floor``), fitted where the tracks allow; [] for no block."""
+    parts = []
+    for group, component in (
+        ("velocity_fit", "u3"),
+        ("velocity", "u3"),
+        ("acceleration_fit", "a3"),
+        ("acceleration", "a3"),
+    ):
+        if group not in (block or {}) or any(p.startswith(component) for p in parts):
+            continue
+        summary = block[group][component]
+        interval = summary.get("ci95", {}).get("rms_normalized")
+        shown = percent(summary["rms_normalized"])
+        if interval is not None and None not in interval:
+            shown += f" [{percent(interval[0])}, {percent(interval[1])}]"
+        shown += " (fit)" if group.endswith("_fit") else ""
+        convergence = block.get("convergence", {})
+        path = f"{group}.{component}.rms_normalized"
+        if path in convergence.get("not_converged", []):
+            # a few tracers or a heavy tail carry it: the robust numbers beside it
+            reasons = ", ".join(convergence.get("reasons", {}).get(path, []))
+            shown += (
+                f" † not converged ({reasons}); median ε/{component} "
+                f"{percent(summary['median'])}, IQR {percent(summary['iqr'])}"
+            )
+        parts.append(f"{component} {shown}")
+    return parts
 
 
 @click.command()

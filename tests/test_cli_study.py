@@ -58,18 +58,22 @@ def test_bad_scene_is_one_line_and_writes_nothing(tmp_path):
 
 def test_study_runs_then_resumes_from_the_command_line(device, tmp_path):
     out = tmp_path / "study"
-    # a deterministic camera: a uniform medium's error is then exactly 0 (the default
-    # camera's independent sensor noise in the two passes would blur it)
-    scene = tmp_path / "scene.toml"
-    scene.write_text("[sensor]\nnoise = false\n")
-    args = ("study", str(scene), "--out", str(out), "--cases", "G=0,C2", "--device", device.name)
+    # the default noisy camera: the measured and reference images share their noise draws,
+    # so a uniform medium's refraction error is exactly 0, and the noise floor is apart
+    args = ("study", "--out", str(out), "--cases", "G=0,C2", "--device", device.name)
     args += tuple(QUICK)
     first = run(*args)
     assert first.exit_code == 0, first.output
     assert "2 cases measured, 0 kept" in first.output and "written" in first.output
     stats = json.loads((out / "stats.json").read_text())
     assert [case["name"] for case in stats["cases"]] == ["G=0", "C2"]
-    assert stats["cases"][0]["position_error_peak_over_L"] == 0.0
+    uniform = stats["cases"][0]
+    assert uniform["position_error_peak_over_L"] == 0.0
+    assert uniform["velocity"]["u3"]["rms_normalized"] == 0.0
+    assert uniform["noise_floor"]["velocity"]["u3"]["rms_normalized"] > 0
+    line = next(row for row in first.output.splitlines() if row.strip().startswith("G=0  "))
+    assert "u3 0 %" in line and "noise floor (camera alone): u3" in line
+    assert "refraction not resolved" in uniform["budget_verdict"]["text"]
     again = run(*args)
     assert again.exit_code == 0, again.output
     assert "0 cases measured, 2 kept" in again.output and "up to date" in again.output

@@ -20,7 +20,7 @@ from rimcl.imaging.centroid import TracerFlag
 from rimcl.imaging.device import image_points
 from rimcl.imaging.frames import Imaging, image_batch
 from rimcl.imaging.render import FrameImage, Renderer
-from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS, Sensor
+from rimcl.imaging.sensor import FLOOR_PASS, REFERENCE_PASS, Sensor
 from rimcl.ptv.measure import run_render
 from rimcl.scene.config import MeasureConfig, SensorConfig
 
@@ -79,7 +79,7 @@ def test_noisy_images_match_the_numpy_engine(device, kind, bits, weights, adc_cl
     flags = np.zeros(len(points), dtype=np.int64)
     seen = 0
     scales = None
-    for pass_id, pass_points in ((REFERENCE_PASS, points), (MEASURED_PASS, _squeezed(points))):
+    for pass_id, pass_points in ((REFERENCE_PASS, points), (FLOOR_PASS, _squeezed(points))):
         (expected, got), images = _both(
             imaging, pass_points, usable, flags, scales, device, pass_id
         )
@@ -113,7 +113,7 @@ def test_per_image_scaling_matches_the_numpy_engine(device):
     ):
         scales = np.full(len(points), 123.0)  # ignored
         (expected, got), images = _both(
-            imaging, squeezed, usable, flags, scales, device, MEASURED_PASS
+            imaging, squeezed, usable, flags, scales, device, FLOOR_PASS
         )
         assert np.array_equal(*images)
         _assert_same(expected, got, same_images=True)
@@ -146,27 +146,27 @@ def test_noise_draws_differ_between_passes_and_repeat(device):
         )
         return columns, canvas.counts
 
-    measured, measured_image = image(MEASURED_PASS)
-    again, again_image = image(MEASURED_PASS)
+    measured, measured_image = image(FLOOR_PASS)
+    again, again_image = image(FLOOR_PASS)
     np.testing.assert_array_equal(again_image, measured_image)
     for name, values in measured.items():
         np.testing.assert_array_equal(again[name], values, err_msg=name)
     found = (measured["flags"] & int(TracerFlag.NO_RAYS | TracerFlag.BELOW_THRESHOLD)) == 0
-    for other in (image(REFERENCE_PASS), image(MEASURED_PASS, FRAME + 1), image(1, 3, ids + 1)):
+    for other in (image(REFERENCE_PASS), image(FLOOR_PASS, FRAME + 1), image(1, 3, ids + 1)):
         columns, counts = other
         lit = (measured_image > 0) | (counts > 0)
         assert np.mean(counts[lit] != measured_image[lit]) > 0.5  # independent draws
         assert np.all(columns["x2"][found] != measured["x2"][found])
     with pytest.raises(RimclError, match="consecutive"):
-        image(MEASURED_PASS, tracer_ids=ids[::-1])
+        image(FLOOR_PASS, tracer_ids=ids[::-1])
     with pytest.raises(RimclError, match="NoiseKey"):
         image_points(imaging, points, usable, 1.0, flags, device=device)
 
 
-def _sensor_render(engine, case, sensor, **options):
+def _sensor_render(engine, case, sensor, k_rho=None, **options):
     config = MeasureConfig.from_options(engine=engine, frame_image=True, **options)
     config = dataclasses.replace(config, sensor=sensor)
-    return run_render(None, case=case, config=config)
+    return run_render(None, case=case, k_rho=k_rho, config=config)
 
 
 NOISY = SensorConfig(
@@ -195,22 +195,30 @@ def test_measurement_matches_the_numpy_engine(device, case, sensor, options):
     assert device_result.config["render"] == numpy_result.config["render"]
     assert_engines_agree(numpy_result, device_result)
     expected = numpy_result.tracers
-    # noise: the measured and reference images of a tracer draw independently
-    if sensor.noise:
-        both = np.isfinite(expected["x2_ref"]) & np.isfinite(expected["x2_meas"])
-        assert np.any(expected["x2_ref"][both] != expected["x2_meas"][both])
+    # noise: the floor's second exposure of the reference draws independently of the first
+    # (both engines alike: assert_engines_agree compares the floor's columns too)
+    assert "x2_floor" in device_result.tracers
+    both = np.isfinite(expected["x2_ref"]) & np.isfinite(expected["x2_floor"])
+    assert both.any()
+    moved = expected["x2_ref"][both] != expected["x2_floor"][both]
+    assert np.any(moved) if sensor.noise else not np.any(moved)
 
 
 def test_device_noise_repeats_run_to_run(device):
     options = {**SAMPLE, "device": device, "camera": "plane", "tracers": 6}
-    first = _sensor_render("device", "C0", NOISY, **options)
-    again = _sensor_render("device", "C0", NOISY, **options)
+    first = _sensor_render("device", None, NOISY, k_rho=0.0, **options)
+    again = _sensor_render("device", None, NOISY, k_rho=0.0, **options)
     for name, values in first.tracers.items():
         np.testing.assert_array_equal(again.tracers[name], values, err_msg=name)
     np.testing.assert_array_equal(again.frame_image, first.frame_image)
-    # C0 is a uniform medium: the measured images differ from the reference by noise alone
-    ref, meas = first.tracers["x2_ref"], first.tracers["x2_meas"]
-    found = np.isfinite(ref) & np.isfinite(meas)
-    assert found.any() and np.all(ref[found] != meas[found])
-    other = _sensor_render("device", "C0", dataclasses.replace(NOISY, seed=6), **options)
+    # G = 0, a uniform medium: the measured image is the reference exposure (common random
+    # numbers), to the bit; the floor's second exposure differs by the sensor's noise alone
+    rows = first.tracers
+    for kind in ("meas", "floor"):
+        found = np.isfinite(rows["x2_ref"]) & np.isfinite(rows[f"x2_{kind}"])
+        assert found.any()
+        moved = rows["x2_ref"][found] != rows[f"x2_{kind}"][found]
+        assert np.all(moved) if kind == "floor" else not np.any(moved)
+    np.testing.assert_array_equal(rows["x3_meas"], rows["x3_ref"])
+    other = _sensor_render("device", None, dataclasses.replace(NOISY, seed=6), k_rho=0.0, **options)
     assert not np.array_equal(other.frame_image, first.frame_image)

@@ -252,7 +252,8 @@ def test_lpt_scene_takes_the_time_scale_from_the_velocity_scale():
 
 def _case_stats():
     """A case's statistics as :func:`rimcl.lpt.run.case_statistics` writes them (known rms)."""
-    rms = {"refraction": 2.0, "baseline": 0.5, "refraction_self_calibrated": None}
+    rms = {"refraction": 2.0, "optics": 1.5, "imaging": 0.5, "noise_floor": 0.25,
+           "baseline": 0.5, "refraction_self_calibrated": None}  # fmt: skip
     absolute = {k: None if v is None else {"rms": v} for k, v in rms.items()}
     kinematic = {axis: {"absolute": absolute, "truth_rms": 8.0} for axis in ("x1", "x2", "x3")}
     position = {axis: {k: absolute[k] for k in rms} for axis in ("x1", "x2", "x3")}
@@ -270,6 +271,8 @@ def test_lpt_units_are_the_field_values_times_the_scales():
     assert velocity["rms_truth"]["mm_s"] == 8.0 * (0.1 / 0.5 * 1e3)
     assert velocity["rms_refraction_self_calibrated"]["mm_s"] is None  # nothing measured
     assert block["acceleration"]["x1"]["rms_baseline"] == {"field": 0.5, "m_s2": 0.5 * 0.1 / 0.25}
+    assert block["velocity"]["x2"]["rms_noise_floor"]["mm_s"] == 0.25 * (0.1 / 0.5 * 1e3)
+    assert block["position"]["x1"]["rms_optics"]["um"] == 1.5 * 1e5
     assert block["position"]["x2"]["rms_refraction"] == {"field": 2.0, "um": 2.0 * 1e5,
                                                          "px": 2.0 / 0.01}  # fmt: skip
     assert block["scales"]["dt_ms"] == 0.04 * 0.5 * 1e3

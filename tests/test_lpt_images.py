@@ -226,3 +226,12 @@ def test_device_and_numpy_engines_measure_alike(lpt_flow, device, tmp_path):
             np.testing.assert_allclose(on_device[name], in_numpy[name], **check, err_msg=name)
     assert same > 0
     assert np.isfinite(on_device["centroid_meas"]).any()
+    # the noise floor's second exposure of the reference (independent draws, no frames kept):
+    # the same flags on both engines, centroids within the tolerance of the frames that differ
+    np.testing.assert_array_equal(on_device["image_flags_floor"], in_numpy["image_flags_floor"])
+    np.testing.assert_allclose(
+        on_device["centroid_floor"], in_numpy["centroid_floor"], rtol=0, atol=1e-3
+    )
+    found = np.isfinite(in_numpy["centroid_floor"]) & np.isfinite(in_numpy["centroid_ref"])
+    assert found.any()
+    assert np.any(in_numpy["centroid_floor"][found] != in_numpy["centroid_ref"][found])

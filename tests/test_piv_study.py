@@ -262,3 +262,29 @@ def test_like_for_like_settings_are_named_so(device):
     assert settings["ptv"] == settings["piv"]
     longer = side_by_side(study, ptv_case, {"dt": 0.1, "pixel_size_over_L": pixel})
     assert longer["differ"] == ["dt"]
+
+
+def test_piv_uniform_medium_has_no_refraction_and_a_noise_floor(device):
+    """A noisy camera through a uniform medium: the pair through the "field" shares its noise
+    draws with the uniform pair (common random numbers), so every refraction vector is
+    exactly 0; the noise floor, a second uniform pair with other draws, is not."""
+    from rimcl.piv.study import run_piv_case
+
+    scene = tiny_scene(device, **{"sensor.noise": True, "cases.names": ["G=0"]})
+    piv, configs = configs_from_study(StudyConfig.from_scene(scene))
+    case = run_piv_case(case="G=0", piv=piv, reference=[], **configs)
+    vectors, stats = case.vectors, case.stats
+    used = vectors["used"]
+    assert used.any()
+    np.testing.assert_array_equal(vectors["dx_field"][used], vectors["dx_uniform"][used])
+    assert stats["velocity"]["u3"]["rms_normalized"] == 0
+    assert stats["displacement_px"]["refraction_rms"] == 0
+    both = used & vectors["valid_floor"]
+    floor = np.hypot(
+        vectors["dx_floor"] - vectors["dx_uniform"], vectors["dy_floor"] - vectors["dy_uniform"]
+    )[both]
+    assert stats["displacement_px"]["noise_floor_rms"] == pytest.approx(
+        np.sqrt(np.mean(floor**2)), rel=1e-12
+    )
+    assert stats["displacement_px"]["noise_floor_rms"] > 0
+    assert stats["noise_floor"]["velocity"]["u3"]["rms_normalized"] > 0

@@ -10,7 +10,7 @@ from rimcl.core.errors import RimclError
 from rimcl.imaging.centroid import locate
 from rimcl.imaging.render import Renderer, quantize, scale_for
 from rimcl.imaging.sensor import (
-    MEASURED_PASS,
+    FLOOR_PASS,
     POISSON_INVERSION_MAX,
     REFERENCE_PASS,
     NoiseKey,
@@ -86,7 +86,7 @@ def test_philox_header_matches_the_host_on_the_opencl_device(device, has_fp64):
     row, tracer, seed = 9, 42, (7 << 32) + 123
     words, uniforms_on_device = draw(width, 2**32 - 100, row, tracer, 2 * 5 + 1, seed)
     columns = np.arange(-100, width - 100)
-    uniforms = pixel_uniforms(seed, NoiseKey(MEASURED_PASS, 5, tracer), row, columns)
+    uniforms = pixel_uniforms(seed, NoiseKey(FLOOR_PASS, 5, tracer), row, columns)
     np.testing.assert_array_equal((words + 0.5) * 2.0**-32, uniforms)
     if has_fp64:
         np.testing.assert_array_equal(uniforms_on_device, uniforms)
@@ -138,7 +138,7 @@ def test_draws_follow_the_global_pixel_grid():
     sensor = Sensor(bit_depth=12, noise=True, peak_electrons=500.0, background_e=3.0)
     raw, window = _tracer_image()
     scale = sensor.scale_for(raw)
-    key = NoiseKey(MEASURED_PASS, 2, 17)
+    key = NoiseKey(FLOOR_PASS, 2, 17)
     whole, _ = sensor.digitize(raw, scale, window.row0, window.col0, key)
     again, _ = sensor.digitize(raw, scale, window.row0, window.col0, key)
     np.testing.assert_array_equal(whole, again)  # same key: same image
@@ -148,13 +148,13 @@ def test_draws_follow_the_global_pixel_grid():
 
 @pytest.mark.parametrize(
     "other",
-    [NoiseKey(REFERENCE_PASS, 2, 17), NoiseKey(MEASURED_PASS, 3, 17), NoiseKey(1, 2, 18), None],
+    [NoiseKey(REFERENCE_PASS, 2, 17), NoiseKey(FLOOR_PASS, 3, 17), NoiseKey(1, 2, 18), None],
 )
 def test_different_keys_draw_independently(other):
     sensor = Sensor(bit_depth=16, noise=True, peak_electrons=2000.0, full_well_e=1e5, seed=1)
     raw = np.full((64, 64), 1.0)
     scale = 1000.0  # 1000 e⁻ per pixel: residuals are shot noise
-    key = NoiseKey(MEASURED_PASS, 2, 17)
+    key = NoiseKey(FLOOR_PASS, 2, 17)
     first, _ = sensor.digitize(raw, scale, 0, 0, key)
     if other is None:  # another seed
         second, _ = dataclasses.replace(sensor, seed=2).digitize(raw, scale, 0, 0, key)
@@ -184,7 +184,7 @@ def test_centroid_scatter_falls_as_one_over_root_electrons():
         scale = sensor.scale_for(raw)
         positions = []
         for tracer in range(200):
-            key = NoiseKey(MEASURED_PASS, 0, tracer)
+            key = NoiseKey(FLOOR_PASS, 0, tracer)
             counts, saturated = sensor.digitize(raw, scale, window.row0, window.col0, key)
             assert not saturated
             blob = locate(counts, 10_000.0)
@@ -206,7 +206,7 @@ def test_full_well_and_gain():
     sensor = Sensor(bit_depth=12, noise=True, peak_electrons=30_000.0, read_noise_e=0.0)
     assert sensor.gain == pytest.approx(30_000.0 / 4095)
     raw = np.array([[0.0, 0.5, 1.0, 2.0]])
-    counts, saturated = sensor.digitize(raw, 30_000.0, 0, 0, NoiseKey(MEASURED_PASS, 0, 0))
+    counts, saturated = sensor.digitize(raw, 30_000.0, 0, 0, NoiseKey(FLOOR_PASS, 0, 0))
     assert saturated and counts[0, 3] == 4095 and counts[0, 0] == 0
     assert abs(counts[0, 1] - 2048) < 5 * np.sqrt(15_000) / sensor.gain
 

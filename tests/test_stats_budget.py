@@ -62,7 +62,14 @@ def test_verdict_names_the_dominant_part(budget_case):
     assert "imaging 3× optics" in verdict["text"] and verdict["text"].startswith("C1:")
     quiet = {**case, "imaging": {"velocity": {"u3": {"rms_normalized": 1e-9}}}}
     quiet["optics"] = {"velocity": {"u3": {"rms_normalized": 2e-9}}}
-    assert budget_verdict(quiet)["dominant"] == "baseline"
+    quiet["velocity"] = {"u3": {"rms_normalized": 2.2e-9}}
+    verdict = budget_verdict(quiet)
+    assert verdict["dominant"] == "baseline" and verdict["refraction_over_baseline"] < 1e-3
+    assert "below the baseline" in verdict["text"]
+    # refraction above the baseline is never said to be dominated by it
+    loud = {**quiet, "velocity": {"u3": {"rms_normalized": 2 * verdict["baseline"]}}}
+    assert budget_verdict(loud)["dominant"] == "optics"
+    assert "above the baseline" in budget_verdict(loud)["text"]
 
 
 def test_verdict_says_whether_images_change_size(budget_case):

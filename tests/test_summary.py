@@ -48,7 +48,11 @@ def test_values_come_with_their_intervals_and_the_paper_statistics_are_labelled(
     # |ε_x| in a header must not split the table
     header = next(line for line in text.splitlines() if "peak \\|ε_x\\| / L" in line)
     assert header.count(" | ") == 5
-    assert "## Error budget: optics, imaging, total, baseline" in text
+    assert "## Error budget: optics, imaging, total, noise floor, baseline" in text
+    # files without the floor's columns: the floor is n/a, said so, not a number
+    budget = [row for row in table_rows(text, "C1") if len(row) == 10]
+    assert len(budget) == 1 and budget[0][4] == "n/a (no floor in the render file)"
+    assert "no noise floor in these render files" in air["budget_verdict"]["text"]
     assert air["budget_verdict"]["text"] in text
 
 
@@ -104,7 +108,8 @@ def test_the_paper_table_gives_both_error_definitions(tmp_path, scene):
     write_render_file(path, n_tracers=40)
     stats = compute_stats([load_render(path)])
     case = stats["cases"][0]
-    assert set(stats["config"]["error_definitions"]) == {"refraction", "against_truth", "baseline"}
+    definitions = stats["config"]["error_definitions"]
+    assert set(definitions) == {"refraction", "against_truth", "baseline", "noise_floor"}
     truth = case["against_truth"]["velocity"]["u3"]
     refraction = case["velocity"]["u3"]
     assert truth["rms_normalized"] != refraction["rms_normalized"]

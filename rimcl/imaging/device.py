@@ -35,7 +35,7 @@ from rimcl.core.errors import RimclError
 from rimcl.imaging.centroid import NO_POSITION, TracerFlag
 from rimcl.imaging.frames import VARIANT_COLUMNS, empty_columns
 from rimcl.imaging.render import TRUNCATE_SIGMAS
-from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS
+from rimcl.imaging.sensor import PASS_IDS
 from rimcl.optics.trace import STATUS_NAMES
 
 logger = logging.getLogger(__name__)
@@ -369,7 +369,7 @@ class DeviceImager:
         if noise is None:
             raise RimclError("a noisy sensor needs a NoiseKey (pass, frame, tracer) per image")
         pass_id, frame, tracer0 = (int(v) for v in noise)
-        if pass_id not in (REFERENCE_PASS, MEASURED_PASS) or not 0 <= frame < 1 << 31:
+        if pass_id not in PASS_IDS or not 0 <= frame < 1 << 31:
             raise RimclError(f"bad noise key {noise!r}: pass must be 0 or 1, frame in [0, 2**31)")
         if not (0 <= tracer0 and tracer0 + n_tracers <= 1 << 32):
             raise RimclError(f"the tracer ids must be in [0, 2**32), got {tracer0} onwards")

@@ -11,9 +11,14 @@ Two modes:
   ``round(e / gain)`` counts, clipped to the ADC range.
 
 **Random numbers.** Every draw is a pure function of ``(seed, pass, frame, tracer, row,
-column)``, with ``row, column`` the pixel in the global sheet grid, so the reference and
-the measured images of a tracer get independent draws, every case of a study the same
-ones (common random numbers), and an OpenCL kernel can reproduce them: Philox-4x32-10
+column)``, with ``row, column`` the pixel in the global sheet grid, and an OpenCL kernel
+can reproduce them. The measured image of a tracer (through the field) and its reference
+image (through the uniform medium) are one exposure of the same camera: they share the
+draws (:data:`MEASURED_PASS` is :data:`REFERENCE_PASS`; common random numbers), so their
+difference is refraction alone and a uniform medium gives exactly zero; every case of a
+study gets the same draws too. The camera's own noise is measured apart, by a second
+exposure of the reference with independent draws (:data:`FLOOR_PASS`): the *noise
+floor*. Philox-4x32-10
 (Salmon et al., SC'11; the Random123 generator, in plain uint32/uint64 NumPy arithmetic)
 maps the counter ``(column, row, tracer, 2 frame + pass)`` under the key ``(seed mod 2³²,
 seed div 2³²)`` to four uint32 words ``w0 … w3``, turned into uniforms
@@ -39,8 +44,15 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.imaging.render import BIT_DEPTHS, quantize, scale_for
 
+#: Draws of the reference exposure (through the uniform medium).
 REFERENCE_PASS = 0
-MEASURED_PASS = 1
+#: Draws of the measured exposure: the reference's (common random numbers), so that the
+#: refraction error ``measured - reference`` holds no sensor noise.
+MEASURED_PASS = REFERENCE_PASS
+#: Draws of a second, independent exposure of the reference: the noise floor.
+FLOOR_PASS = 1
+#: The pass ids a noise key may hold.
+PASS_IDS = (REFERENCE_PASS, FLOOR_PASS)
 #: Largest mean drawn by Poisson inversion; above it the rounded normal approximation.
 POISSON_INVERSION_MAX = 16.0
 #: Inversion stops here (P(N > 64) < 1e-20 at a mean of 16).
@@ -54,7 +66,8 @@ _TWO_POW_M32 = 2.0**-32
 
 
 class NoiseKey(typing.NamedTuple):
-    """Which draws an image gets: pass (reference 0, measured 1), frame and tracer."""
+    """Which draws an image gets: pass (:data:`REFERENCE_PASS`, shared by the measured
+    image, or :data:`FLOOR_PASS`), frame and tracer."""
 
     pass_id: int
     frame: int
@@ -110,7 +123,7 @@ def pixel_uniforms(seed, key, rows, columns):
     pass_id, frame, tracer = (int(v) for v in key)
     if seed < 0 or seed >= 1 << 64:
         raise RimclError(f"the noise seed must be in [0, 2**64), got {seed}")
-    if pass_id not in (REFERENCE_PASS, MEASURED_PASS) or not 0 <= frame < 1 << 31:
+    if pass_id not in PASS_IDS or not 0 <= frame < 1 << 31:
         raise RimclError(f"bad noise key {key!r}: pass must be 0 or 1, frame in [0, 2**31)")
     if not 0 <= tracer < 1 << 32:
         raise RimclError(f"the tracer id must be in [0, 2**32), got {tracer}")

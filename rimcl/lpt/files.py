@@ -8,8 +8,9 @@ with named dimensions (HDF5 dimension scales) and a ``units`` attribute on every
   time scale), ``units`` (JSON), ``config`` and ``versions`` (JSON);
 - ``tracks/``: scales ``id (N,)`` and ``frame (F,)``; ``time (frame)``, ``flags (id)`` (1: a
   ray failed, 2: an image off a sensor, 4: an image not located), and per tracer and frame
-  ``(id, frame)`` float64: ``x{1,2,3}_{true,meas,ref}``, ``x{1,2,3}_opt_{meas,ref}``
-  (``L0``, field length units), ``u{1,2,3}_true`` (``L0/T0``), ``a{1,2,3}_true``
+  ``(id, frame)`` float64: ``x{1,2,3}_{true,meas,ref}``, ``x{1,2,3}_opt_{meas,ref}``,
+  ``x{1,2,3}_floor`` (the reference exposed again with independent noise draws: the noise
+  floor) (``L0``, field length units), ``u{1,2,3}_true`` (``L0/T0``), ``a{1,2,3}_true``
   (``L0/T0^2``); each with ``si_per_unit`` (metres, m/s, m/s², seconds per unit) where the
   scales are known (``L0`` always, the others with ``time_s``); at the threshold ×½ and ×2
   (``<s>`` = ``threshold_half``, ``threshold_double``: every image located again at that
@@ -146,6 +147,7 @@ def write_case(path, run, result, scene, overwrite=True):
                 f"x{axis + 1}_ref": (result["x_ref"], "L0"),
                 f"x{axis + 1}_opt_meas": (result["x_opt_meas"], "L0"),
                 f"x{axis + 1}_opt_ref": (result["x_opt_ref"], "L0"),
+                f"x{axis + 1}_floor": (result.get("x_floor"), "L0"),
                 f"x{axis + 1}_vsc": (result.get("x_vsc"), "L0"),
                 **{
                     f"x{axis + 1}_{kind}_{suffix}": (result[f"x_{kind}_{suffix}"], "L0")

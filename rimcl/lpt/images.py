@@ -28,9 +28,10 @@ tracer's peak (counts), as an experimenter sets it per camera.
 **Pixels.** LPT pixel coordinates put pixel ``(0, 0)``'s centre at ``(0, 0)``; the renderer's
 pixel ``i`` spans ``[i, i + 1)``, so its origin is ``(-0.5, -0.5)`` with a pixel size of 1.
 
-**Noise draws** are keyed ``(pass, frame, c N + i)`` for tracer ``i`` of camera ``c`` (pass 0
-the uniform fluid, 1 the field): independent between cameras and passes, the same in every
-case (common random numbers).
+**Noise draws** are keyed ``(pass, frame, c N + i)`` for tracer ``i`` of camera ``c``: the
+image through the field and the one through the uniform fluid share pass 0 (common random
+numbers: their difference is refraction alone), the noise floor's second exposure of the
+uniform fluid draws pass 1; independent between cameras, the same in every case.
 """
 
 import dataclasses
@@ -41,11 +42,11 @@ from rimcl.imaging.centroid import EXCLUDING, TracerFlag
 from rimcl.imaging.frames import THRESHOLD_VARIANTS, Imaging, image_batch
 from rimcl.imaging.mie import ray_weights
 from rimcl.imaging.render import FrameImage, Renderer, Window
-from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS, Sensor
+from rimcl.imaging.sensor import FLOOR_PASS, MEASURED_PASS, REFERENCE_PASS, Sensor
 
 #: Pixel-coordinate origin of the renderer for LPT pixels (pixel centres at integers).
 ORIGIN = (-0.5, -0.5)
-PASSES = {"ref": REFERENCE_PASS, "meas": MEASURED_PASS}
+PASSES = {"ref": REFERENCE_PASS, "meas": MEASURED_PASS, "floor": FLOOR_PASS}
 
 
 def renderer_for(camera, bit_depth, max_window=512):

@@ -9,15 +9,17 @@ For each case of the scene (same tracers, same tracks, common random numbers):
    per tracer are chosen by convergence of the located image centroid (:mod:`.images`,
    :mod:`.views`);
 4. at every frame each tracer is seen by each camera through the field (``meas``) and
-   through the uniform fluid (``ref``), its image rendered, digitised and located, and
-   triangulated on the calibrated models, from the located centroids and from the optics
-   centroids (the optics part of the error);
+   through the uniform fluid (``ref``, with the same sensor noise draws), its image
+   rendered, digitised and located, and triangulated on the calibrated models, from the
+   located centroids and from the optics centroids (the optics part of the error); a noisy
+   camera exposes the reference again with other draws (``floor``: the noise floor);
 5. the volume self-calibration corrects the models on the measured images of every frame
    (:mod:`.selfcal`), and the first frame is matched from the images alone
    (:mod:`.matching`);
 6. tracks are fitted (sliding polynomial, :func:`rimcl.ptv.track.sliding_fit`) and compared:
-   refraction ``meas - ref`` (with and without the self-calibration) and baseline
-   ``ref - true``, per component; the headline numbers again with every image located at
+   refraction ``meas - ref`` (with and without the self-calibration), its optics and
+   imaging parts, the noise floor ``floor - ref`` and the baseline ``ref - true``, per
+   component (:mod:`rimcl.lpt.budget`); the headline numbers again with every image located at
    each camera's threshold ×½ and ×2 (:mod:`rimcl.lpt.sensitivity`).
 
 Units: positions in field length units (``length_m`` metres each), image points in pixels,
@@ -35,6 +37,7 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.imaging.frames import THRESHOLD_VARIANTS
 from rimcl.lpt import checks
+from rimcl.lpt.budget import FIT_KINDS, budget_lines, kinematic_errors
 from rimcl.lpt.calibration import PinholeModel, SoloffModel, target_points, triangulate
 from rimcl.lpt.config import CameraSpec, check_run_memory, preset_cameras
 from rimcl.lpt.config import describe as describe_scene
@@ -315,10 +318,11 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
     ]
     timings["ray_choice"] = time.perf_counter() - started
     kinds = ("meas", "ref")
-    centroid = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
-    optics = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in kinds}
-    image_flags = {kind: np.zeros((frames, ncam, count), dtype=np.int64) for kind in kinds}
-    peaks = {kind: np.full((frames, ncam, count), np.nan) for kind in kinds}
+    exposures = (*kinds, "floor")  # floor: the reference exposed again, other noise draws
+    centroid = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in exposures}
+    optics = {kind: np.full((frames, ncam, count, 2), np.nan) for kind in exposures}
+    image_flags = {kind: np.zeros((frames, ncam, count), dtype=np.int64) for kind in exposures}
+    peaks = {kind: np.full((frames, ncam, count), np.nan) for kind in exposures}
     # the same images located at each variant threshold: (centroids, flags) per kind
     variants = {
         (kind, suffix): (np.full((frames, ncam, count, 2), np.nan), np.zeros_like(peaks[kind], int))
@@ -332,11 +336,14 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
         field = field0 if k == 0 else index.field(run.source, None, moment)
         timings["field"] += time.perf_counter() - started
         for c, camera in enumerate(cameras):
-            for kind, medium in (("meas", field), ("ref", uniform)):
+            for kind, medium in (("meas", field), ("ref", uniform), ("floor", None)):
+                if kind == "floor" and not sensor.noise:
+                    continue  # a noiseless camera exposes the same image twice
                 started = time.perf_counter()
-                seen = view(medium, camera, run.true[k], choices[c]["rays"], tracer)
+                if medium is not None:  # the floor images the reference's rays again
+                    seen = view(medium, camera, run.true[k], choices[c]["rays"], tracer)
                 middle = time.perf_counter()
-                canvas = new_canvas(camera, sensor) if frame_sink else None
+                canvas = new_canvas(camera, sensor) if frame_sink and medium else None
                 found = locate_view(
                     imagings[c],
                     seen,
@@ -354,17 +361,20 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
                 optics[kind][k, c] = found.optics
                 image_flags[kind][k, c] = found.flags
                 peaks[kind][k, c] = found.peak
-                for suffix, (points, bits) in found.variants.items():
+                for suffix, (points, bits) in found.variants.items() if medium else ():
                     variants[kind, suffix][0][k, c], variants[kind, suffix][1][k, c] = points, bits
-                if frame_sink:
+                if canvas is not None:
                     frame_sink(str(index.name), kind, camera, k, canvas.counts)
         if progress:
             progress(case, k + 1, frames)
+    if not sensor.noise:
+        centroid["floor"], image_flags["floor"] = centroid["ref"], image_flags["ref"]
     started = time.perf_counter()
     positions, disparity = {}, {}
     for kind in kinds:
         for label, points in ((kind, centroid[kind]), (f"opt_{kind}", optics[kind])):
             positions[label], disparity[label] = triangulate_frames(models, points)
+    positions["floor"] = triangulate_frames(models, centroid["floor"])[0]
     pinhole = [f["pinhole"] for f in fitted]
     pinhole_ref = triangulate_frames(pinhole, centroid["ref"])[0]
     timings["triangulation"] = time.perf_counter() - started
@@ -436,6 +446,8 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
         for label in (kind, f"opt_{kind}"):
             result[f"x_{label}"] = positions[label]
             result[f"disparity_{label}"] = disparity[label]
+    result["x_floor"], result["centroid_floor"] = positions["floor"], centroid["floor"]
+    result["image_flags_floor"] = image_flags["floor"]
     if calibrated is not None:
         result["x_vsc"], result["disparity_vsc"] = positions["vsc"], disparity["vsc"]
     for (kind, suffix), (points, bits) in variants.items():
@@ -519,6 +531,7 @@ def case_statistics(run, result, scene):
     x_meas, x_ref = result["x_meas"][:, keep], result["x_ref"][:, keep]
     optics = result["x_opt_meas"][:, keep] - result["x_opt_ref"][:, keep]
     x_vsc = result["x_vsc"][:, keep] if "x_vsc" in result else None
+    x_floor = result["x_floor"][:, keep]
     truth = run.true[:, keep]
     position = {}
     for axis, name in enumerate(COMPONENTS):
@@ -528,6 +541,7 @@ def case_statistics(run, result, scene):
             "refraction": refraction,
             "optics": rms_interval(optics[..., axis].ravel(), ids, bootstrap),
             "imaging": rms_interval((x_meas - x_ref - optics)[..., axis].ravel(), ids, bootstrap),
+            "noise_floor": rms_interval((x_floor - x_ref)[..., axis].ravel(), ids, bootstrap),
             "baseline": baseline,
             "refraction_self_calibrated": None
             if x_vsc is None
@@ -572,7 +586,7 @@ def case_statistics(run, result, scene):
     dt = float(run.times[1] - run.times[0]) if run.times.size > 1 else None
     fits = {
         kind: sliding_fit(result[f"x_{kind}"][:, keep], dt, window, order)
-        for kind in ("meas", "ref", "vsc")
+        for kind in FIT_KINDS
         if f"x_{kind}" in result
     }
     centres = fits["meas"].centres
@@ -581,15 +595,8 @@ def case_statistics(run, result, scene):
         ("velocity", "velocity", run.u_true),
         ("acceleration", "acceleration", run.a_true),
     ):
-        reference = getattr(fits["ref"], attribute)
         truth = true_values[centres][:, keep]
-        errors = {
-            "refraction": getattr(fits["meas"], attribute) - reference,
-            "baseline": reference - truth,
-            "refraction_self_calibrated": getattr(fits["vsc"], attribute) - reference
-            if "vsc" in fits
-            else None,
-        }
+        errors = kinematic_errors(fits, attribute, truth)
         block = {}
         for axis, name in enumerate(COMPONENTS):
             block[name] = {
@@ -740,16 +747,7 @@ def summary_lines(document):
             "  position refraction rms (px): "
             + ", ".join(f"{k} {_cell(pos[k]['refraction_rms_px'])}" for k in COMPONENTS)
         )
-        for label in ("velocity", "acceleration"):
-            block = case[label]
-            lines.append(
-                f"  {label} rms(ε)/rms(truth): "
-                + ", ".join(
-                    f"{k} {_cell(block[k]['refraction']['rms_normalized'])} "
-                    f"(baseline {_cell(block[k]['baseline']['rms_normalized'])})"
-                    for k in COMPONENTS
-                )
-            )
+        lines.extend(budget_lines(case))
         lines.append("  " + _physical_line(case.get("units")))
         lines.extend(band_lines(case))
         for kind, label in (("meas", ""), ("vsc", " (self-calibrated)")):

@@ -13,8 +13,16 @@ block's ``note`` says so.
 from rimcl.stats.units import scale_note, scales
 
 COMPONENTS = ("x1", "x2", "x3")
-#: Errors of each component (``meas − ref``, ``ref − true``, self-calibrated ``meas − ref``).
-ERRORS = ("refraction", "baseline", "refraction_self_calibrated")
+#: Errors of each component (``meas − ref``, its optics and imaging parts, the noise floor
+#: ``floor − ref``, ``ref − true``, self-calibrated ``meas − ref``; :mod:`rimcl.lpt.budget`).
+ERRORS = (
+    "refraction",
+    "optics",
+    "imaging",
+    "noise_floor",
+    "baseline",
+    "refraction_self_calibrated",
+)
 #: Per kinematic group: the physical unit's key and the factor of :func:`scales` for it.
 _GROUPS = {
     "velocity": ("mm_s", "mm_s_per_velocity"),

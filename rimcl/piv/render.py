@@ -53,7 +53,7 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.fields.crop import CroppedSource
 from rimcl.imaging.render import Renderer
-from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS
+from rimcl.imaging.sensor import FLOOR_PASS, MEASURED_PASS, REFERENCE_PASS
 from rimcl.optics.camera import Scene
 from rimcl.piv.analysis import PivSettings, WindowGrid
 from rimcl.piv.frame_pair import PivFrames, image_frames
@@ -146,7 +146,11 @@ class PivReference:
     truth : dict
         :func:`rimcl.piv.truth.true_displacement` on the final window grid.
     uniform : PivFrames
-        The pair imaged through a uniform medium.
+        The pair imaged through a uniform medium (with the sensor noise draws the pair
+        through the field shares: common random numbers).
+    floor : PivFrames or None
+        The uniform-medium pair exposed again with independent sensor noise draws (the
+        noise floor); None for a noiseless sensor (the same images again).
     """
 
     key: dict
@@ -154,6 +158,7 @@ class PivReference:
     weights: np.ndarray
     truth: dict
     uniform: PivFrames
+    floor: PivFrames = None
 
 
 @dataclasses.dataclass
@@ -369,8 +374,9 @@ def run_piv_render(
         camera's reference depends on the case's mean index).
     sensor : rimcl.scene.config.SensorConfig, optional
         The camera's sensor (default: deterministic, ``imaging.bit_depth`` bits); its seed
-        defaults to ``piv.seed``. Noise draws: the uniform-medium frames pass 0, the
-        field's pass 1, exposure A frame 0, B frame 1.
+        defaults to ``piv.seed``. Noise draws: the uniform-medium frames and the field's
+        share pass 0 (common random numbers), the noise floor's second uniform pair pass 1;
+        exposure A frame 0, B frame 1.
     mie : rimcl.scene.config.MieConfig, optional
         Mie weights of the rays (default: off).
     progress : bool
@@ -455,7 +461,7 @@ def run_piv_render(
             weights = pair_weights(positions, scene.x_sheet, imaging.thickness(scene, cam))
             uniform = uniform_like(source, getattr(cam, "fluid_index", 1.0))
             if bar is not None:
-                bar.reset(total=4 * positions.shape[1])
+                bar.reset(total=(6 if sensor_model.noise else 4) * positions.shape[1])
             uniform_frames = image_frames(
                 (uniform, uniform),
                 positions,
@@ -466,6 +472,19 @@ def run_piv_render(
                 noise=(REFERENCE_PASS, 0),
                 **imaging_options,
             )
+            floor_frames = None
+            if sensor_model.noise:
+                # the same pair again with independent draws: the camera's noise alone
+                floor_frames = image_frames(
+                    (uniform, uniform),
+                    positions,
+                    scene,
+                    cam,
+                    imaging,
+                    {**options, "step": reference_step(integrator.step, source)},
+                    noise=(FLOOR_PASS, 0),
+                    **imaging_options,
+                )
             reference = PivReference(
                 key={**key, "motion": motion},
                 positions=positions,
@@ -474,6 +493,7 @@ def run_piv_render(
                     positions, renderer, imaging.frame_shape(scene, cam), grid, weights
                 ),
                 uniform=uniform_frames,
+                floor=floor_frames,
             )
         elif {k: v for k, v in reference.key.items() if k != "motion"} != key:
             changed = sorted(k for k in key if reference.key.get(k) != key[k])

@@ -5,7 +5,8 @@ Each realisation (one seed) seeds its own tracers as a PIV pair does
 (:func:`rimcl.piv.imaging_config.seed_particles`), carries them through the flow over all
 ``frames`` exposures ``t_k = t_A + k Δt`` (:func:`rimcl.piv.tracer_motion.move_tracers`) and
 images exposure ``k`` through the field at ``t_k`` (:func:`rimcl.piv.frame_pair.image_frames`,
-either engine; sensor noise frame ``k``, pass 1).
+either engine; sensor noise frame ``k``, the measured pass
+:data:`rimcl.imaging.sensor.MEASURED_PASS`).
 
 **Dense truth**: for every pixel centre on the sheet and every step ``k → k + 1``, the
 displacement of a fluid particle starting there at ``t_k`` (the same RK4 integration as the

@@ -70,6 +70,9 @@ VECTOR_COLUMNS = (
     "peak_ratio_uniform",
     "valid_field",
     "valid_uniform",
+    "dx_floor",
+    "dy_floor",
+    "valid_floor",
     "truth_weight",
     "truth_tracers",
     "used",
@@ -85,11 +88,15 @@ class PivCaseReference:
     render : rimcl.piv.render.PivReference
     settings : rimcl.piv.analysis.PivSettings
     uniform_vectors : rimcl.piv.analysis.PivResult
+    floor_vectors : rimcl.piv.analysis.PivResult
+        Of the noise floor's second uniform-medium pair (the uniform vectors on a noiseless
+        sensor).
     """
 
     render: object
     settings: PivSettings
     uniform_vectors: object
+    floor_vectors: object = None
 
 
 @dataclasses.dataclass
@@ -146,7 +153,7 @@ def optics_error(render, grid):
     return means
 
 
-def per_vector(render, field_vectors, uniform_vectors):
+def per_vector(render, field_vectors, uniform_vectors, floor_vectors=None):
     """The per-vector table of a case (:data:`VECTOR_COLUMNS`).
 
     Parameters
@@ -154,6 +161,9 @@ def per_vector(render, field_vectors, uniform_vectors):
     render : rimcl.piv.render.PivRender
     field_vectors, uniform_vectors : rimcl.piv.analysis.PivResult
         On the grid of the truth (same window and overlap).
+    floor_vectors : rimcl.piv.analysis.PivResult, optional
+        The noise floor's second uniform-medium pair (default: the uniform vectors, a
+        noiseless sensor's).
 
     Returns
     -------
@@ -173,6 +183,7 @@ def per_vector(render, field_vectors, uniform_vectors):
     def usable(result):
         return result.valid & np.isfinite(result.dx) & np.isfinite(result.dy)
 
+    floor_vectors = uniform_vectors if floor_vectors is None else floor_vectors
     valid_field, valid_uniform = usable(field_vectors), usable(uniform_vectors)
     has_truth = (truth["tracers"] > 0) & np.isfinite(truth["dx"]) & np.isfinite(truth["dy"])
     # copies: the truth and the uniform-medium vectors are shared by every case of a study
@@ -191,6 +202,9 @@ def per_vector(render, field_vectors, uniform_vectors):
         "peak_ratio_uniform": uniform_vectors.peak_ratio,
         "valid_field": valid_field,
         "valid_uniform": valid_uniform,
+        "dx_floor": floor_vectors.dx,
+        "dy_floor": floor_vectors.dy,
+        "valid_floor": usable(floor_vectors),
         "truth_weight": truth["weight"],
         "truth_tracers": truth["tracers"],
         "used": valid_field & valid_uniform & has_truth,
@@ -206,7 +220,8 @@ def velocity_table(vectors, pixel_size, dt):
     dict of str to ndarray, 1-D
         ``u2_true, u3_true`` (window-averaged truth), ``u2_ref, u3_ref`` (uniform medium),
         ``u2_meas, u3_meas`` (through the field), ``u2_opt, u3_opt`` (uniform-medium vector
-        plus the optics part), in length units per time unit.
+        plus the optics part), ``u2_floor, u3_floor`` (the noise floor's second uniform
+        pair, NaN where its vector is not valid), in length units per time unit.
     """
     used = vectors["used"]
     factor = pixel_size / dt
@@ -214,6 +229,9 @@ def velocity_table(vectors, pixel_size, dt):
     for suffix, column in (("true", "true"), ("ref", "uniform"), ("meas", "field")):
         table[f"u2_{suffix}"] = vectors[f"dx_{column}"][used] * factor
         table[f"u3_{suffix}"] = vectors[f"dy_{column}"][used] * factor
+    floor_valid = vectors["valid_floor"][used]
+    for name, column in (("u2_floor", "dx_floor"), ("u3_floor", "dy_floor")):
+        table[name] = np.where(floor_valid, vectors[column][used], np.nan) * factor
     table["u2_opt"] = table["u2_ref"] + vectors["dx_optics"][used] * factor
     table["u3_opt"] = table["u3_ref"] + vectors["dy_optics"][used] * factor
     return table
@@ -265,6 +283,7 @@ def vector_errors(table, measured, reference, ids=None):
     """
     true, meas, ref = ((table[f"u2_{k}"], table[f"u3_{k}"]) for k in ("true", measured, reference))
     angles = angle_deg(meas, ref)
+    angles = angles[np.isfinite(angles)]  # the floor's invalid vectors are NaN
     return {
         "u2": error_summary(meas[0] - ref[0], true[0], ids),
         "u3": error_summary(meas[1] - ref[1], true[1], ids),
@@ -316,6 +335,9 @@ def case_statistics(render, vectors, settings):
         vectors["dy_field"] - vectors["dy_uniform"] - vectors["dy_optics"],
     )[used]
     truth = np.hypot(vectors["dx_true"], vectors["dy_true"])[used]
+    floor = np.hypot(
+        vectors["dx_floor"] - vectors["dx_uniform"], vectors["dy_floor"] - vectors["dy_uniform"]
+    )[used & vectors["valid_floor"]]
     length = render.scene.depth
     blocks, block_side = window_blocks(used.shape, settings.overlap)
     ids = blocks[used]
@@ -341,6 +363,7 @@ def case_statistics(render, vectors, settings):
         "velocity": vector_errors(table, "meas", "ref", ids),
         "optics": vector_errors(table, "opt", "ref", ids),
         "baseline": {"velocity": vector_errors(table, "ref", "true", ids)},
+        "noise_floor": {"velocity": vector_errors(table, "floor", "ref", ids)},
         "bootstrap_block_vectors": block_side,
         "displacement_px": {
             "truth_rms": _rms(truth),
@@ -349,6 +372,7 @@ def case_statistics(render, vectors, settings):
             "optics_rms": _rms(optics),
             "imaging_rms": _rms(imaging),
             "baseline_rms": _rms(baseline),
+            "noise_floor_rms": _rms(floor),
         },
         "rays": {"field": render.field.ray_counts, "uniform": render.uniform.ray_counts},
         "saturated_pixels": {
@@ -425,10 +449,12 @@ def run_piv_case(
     reference = next((r for r in candidates if r.render is render.reference), None)
     if reference is None:
         uniform_vectors = analyze_pair(*render.uniform.images, settings)
-        reference = PivCaseReference(render.reference, settings, uniform_vectors)
+        floor = render.reference.floor
+        floor_vectors = uniform_vectors if floor is None else analyze_pair(*floor.images, settings)
+        reference = PivCaseReference(render.reference, settings, uniform_vectors, floor_vectors)
     field_vectors = analyze_pair(*render.field.images, settings)
     piv_done = time.perf_counter()
-    vectors = per_vector(render, field_vectors, reference.uniform_vectors)
+    vectors = per_vector(render, field_vectors, reference.uniform_vectors, reference.floor_vectors)
     stats = case_statistics(render, vectors, settings)
     end = time.perf_counter()
     seconds = {"render": middle - start, "piv": piv_done - middle, "errors": end - piv_done}

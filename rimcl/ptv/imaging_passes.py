@@ -1,11 +1,15 @@
-"""The two imaging passes of a measurement: the reference and the measured images.
+"""The imaging passes of a measurement: the reference, noise-floor and measured images.
 
-Tracers are imaged twice by the same code: through a uniform medium along their true tracks
+Tracers are imaged by the same code through a uniform medium along their true tracks
 (:func:`make_reference`, case-independent, reusable) and through each frame's
-refractive-index field (:func:`make_measured`). Work proceeds in batches of tracers (the
-*fused path*): a batch's rays are traced, rendered into per-tracer windows and centroided,
-and only per-tracer numbers are kept, so memory does not grow with the number of tracers or
-rays. :class:`RaySampler` keeps a random subset of the measured rays for the output file.
+refractive-index field (:func:`make_measured`). The measured and the reference image of a
+tracer share the sensor's noise draws (common random numbers), so their difference is
+refraction alone; a noisy sensor's reference is exposed a second time with independent
+draws (the *noise floor*: what the camera's noise alone does to a measurement). Work
+proceeds in batches of tracers (the *fused path*): a batch's rays are traced, rendered into
+per-tracer windows and centroided, and only per-tracer numbers are kept, so memory does not
+grow with the number of tracers or rays. :class:`RaySampler` keeps a random subset of the
+measured rays for the output file.
 """
 
 import dataclasses
@@ -17,7 +21,7 @@ import numpy as np
 from rimcl.core.errors import RimclError
 from rimcl.imaging.centroid import TracerFlag
 from rimcl.imaging.frames import empty_columns, image_batch
-from rimcl.imaging.sensor import MEASURED_PASS, REFERENCE_PASS
+from rimcl.imaging.sensor import FLOOR_PASS, MEASURED_PASS, REFERENCE_PASS
 from rimcl.optics.aiming import aim_origins
 from rimcl.optics.straight import straight_path_limit, straight_rays
 from rimcl.optics.trace import STATUS_NAMES
@@ -27,10 +31,12 @@ from rimcl.ptv.render_file import Reference
 from rimcl.ptv.track import SheetVelocity, integrate_tracks, track_acceleration, track_velocity
 
 TRACKING_SUBSTEPS = 8  # RK4 steps between frames (error ~1e-9 of the motion at Δt = 0.005)
+#: The image columns kept of the noise-floor exposure.
+FLOOR_COLUMNS = ("x2", "x3", "flags")
 
 
 class _Pass:
-    """One imaging pass (reference or measured) over all tracers of all frames."""
+    """One imaging pass (reference, noise floor or measured) over all tracers of all frames."""
 
     def __init__(self, pass_id, frames, tracers):
         self.pass_id = pass_id
@@ -244,6 +250,15 @@ def make_reference(setup, bar=None):
             "no ray of any tracer reaches the camera even through a uniform medium: "
             "check the camera geometry (distance, view angle, aperture) against the field"
         )
+    floor_images = ref.images  # a noiseless camera exposes the same image twice
+    if setup.imaging.sensor.noise:
+        # the same light again, independent draws: the camera's own noise (the floor)
+        floor = _Pass(FLOOR_PASS, len(setup.frame_ids), len(setup.start_positions))
+        for f in range(len(setup.frame_ids)):
+            _image_frame(
+                reference_setup, floor, f, uniform, tracks[f], scales=ref.images["scale"][f]
+            )
+        floor_images = floor.images
     return Reference(
         key=setup.key,
         tracks=tracks,
@@ -251,6 +266,7 @@ def make_reference(setup, bar=None):
         true_acceleration=true_acceleration,
         outside=outside,
         images=ref.images,
+        floor_images={name: floor_images[name] for name in FLOOR_COLUMNS},
         ray_counts=ref.counts(),
         ray_steps=ref.ray_steps,
     )

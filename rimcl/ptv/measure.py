@@ -172,6 +172,15 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
             "x3_opt_ref": rows(ref["x3_opt"]),
         }
     )
+    # the noise floor: the reference exposed again with independent sensor noise, its
+    # positions NaN where that exposure lost or split the tracer (flags_floor says why)
+    floor = reference.floor_images
+    floor_lost = (floor["flags"] & int(EXCLUDING)) != 0
+    floor_position = np.stack([floor["x2"], floor["x3"]], axis=-1)
+    floor_position[floor_lost] = np.nan
+    tracers["x2_floor"] = rows(floor_position[..., 0])
+    tracers["x3_floor"] = rows(floor_position[..., 1])
+    tracers["flags_floor"] = rows(floor["flags"])
     for name in ("area", "perimeter", "circularity"):
         tracers[f"{name}_ref"] = rows(ref[name])
         tracers[f"{name}_meas"] = rows(meas[name])
@@ -194,6 +203,7 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
         "meas": np.stack([meas["x2"], meas["x3"]], axis=-1),
         "opt": np.stack([meas["x2_opt"], meas["x3_opt"]], axis=-1),
         "opt_ref": np.stack([ref["x2_opt"], ref["x3_opt"]], axis=-1),
+        "floor": floor_position,
     }
     truth = {"velocity": reference.true_velocity, "acceleration": reference.true_acceleration}
     kinematics = kinematics_tables(ids, positions, truth, flags, notes, setup.dt, setup.time)

@@ -44,6 +44,10 @@ class Reference:
     images : dict of str to ndarray (F, N)
         Reference image columns (:data:`rimcl.imaging.frames.IMAGE_COLUMNS`; ``scale`` is the
         factor reused for the measured images).
+    floor_images : dict of str to ndarray (F, N)
+        ``x2``, ``x3`` and ``flags`` of a second exposure of the reference with independent
+        sensor noise draws (the noise floor; the reference's own columns on a noiseless
+        camera).
     ray_counts : dict of str to int
         Trace status counts of all reference rays, plus ``vignetted``.
     ray_steps : int
@@ -56,6 +60,7 @@ class Reference:
     true_acceleration: np.ndarray
     outside: np.ndarray
     images: dict
+    floor_images: dict
     ray_counts: dict
     ray_steps: int
 
@@ -156,6 +161,10 @@ def merge_results(parts):
         else np.concatenate([r.true_acceleration for r in refs], axis=1),
         outside=np.concatenate([r.outside for r in refs], axis=1),
         images={k: np.concatenate([r.images[k] for r in refs], axis=1) for k in refs[0].images},
+        floor_images={
+            k: np.concatenate([r.floor_images[k] for r in refs], axis=1)
+            for k in refs[0].floor_images
+        },
         ray_counts={k: sum(r.ray_counts[k] for r in refs) for k in refs[0].ray_counts},
         ray_steps=sum(r.ray_steps for r in refs),
     )

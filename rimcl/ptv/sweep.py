@@ -5,7 +5,8 @@ frames ``m Δt`` apart. The velocity and acceleration tables (the paper's differ
 the sliding fit) are rebuilt from the positions of those frames alone, so a
 sweep costs no tracing: each multiple gives a ``stats.json`` document, and the figure of
 :func:`rimcl.stats.figures_dt_sweep.write_dt_sweep_figure` shows at which Δt refraction rises
-above the baseline (finite differences, rendering and rounding).
+above the baseline (finite differences, rendering and rounding) and above the noise floor
+(two independent exposures through the uniform medium).
 """
 
 import dataclasses
@@ -17,7 +18,7 @@ from rimcl.ptv.kinematics import add_variant_columns, kinematics_tables
 from rimcl.scene.config import TimeConfig
 
 #: Position kinds of a render file's ``tracers`` table (columns ``x2_<kind>``, ``x3_<kind>``).
-KINDS = ("true", "ref", "meas", "opt", "opt_ref")
+KINDS = ("true", "ref", "meas", "opt", "opt_ref", "floor")
 
 
 def _by_frame(column, frames):

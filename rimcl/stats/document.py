@@ -12,6 +12,9 @@ Output: one ``stats.json`` document, whose shape is documented in the README:
   companions median, interquartile range and ``rms(ε) / rms(truth)``, also over the
   tracers whose truth is not small (``|truth| ≥ CONDITION_FRACTION · rms(truth)``);
 - the finite-difference baseline ``u^ref - u`` and ``a^ref - a`` with the same summaries;
+- the noise floor ``x^floor - x^ref``, ``u^floor - u^ref``, ``a^floor - a^ref``: a second
+  exposure of the reference with independent sensor noise against the first (the measured
+  and reference images share the camera's noise draws, so the refraction errors hold none);
 - where the render file holds them, the same for the sliding-polynomial-fit tracks
   (``velocity_fit``, ``acceleration_fit``) and the split of the error into ``optics`` (the
   light-weighted mean of the traced ray image points, no pixels) and ``imaging`` (the rest:
@@ -43,6 +46,7 @@ from rimcl.stats.convergence import convergence
 from rimcl.stats.error_blocks import (
     budget_part,
     kinematic_blocks,
+    noise_floor,
     refraction_errors,
     vector_columns,
     vector_errors,
@@ -67,41 +71,87 @@ def _area_change_peak(tracers):
 IMAGE_RESHAPED = 0.25
 
 
+#: How the verdict names the contenders of the velocity error.
+PART_NAMES = {
+    "optics": "optics",
+    "imaging": "imaging",
+    "noise_floor": "noise floor",
+    "baseline": "baseline",
+}
+
+
+def _u3(block):
+    """``velocity.u3.rms_normalized`` of a stats block, or None."""
+    return ((block or {}).get("velocity") or {}).get("u3", {}).get("rms_normalized")
+
+
+def _against(refraction, other, name):
+    """``below the noise floor (0.62 %, refraction 0.18×)``: refraction against a named term."""
+    if other is None:
+        return None
+    if other == 0:
+        return f"the {name} is 0"
+    relation = "above" if refraction > other else "below"
+    return f"{relation} the {name} ({100 * other:.3g} %, refraction {refraction / other:.2g}×)"
+
+
 def budget_verdict(case):
-    """Which part of the velocity error dominates a case: optics, imaging or the baseline.
+    """How the velocity error of a case compares: refraction (optics, imaging) against the
+    noise floor and the baseline.
 
     Parameters
     ----------
     case : dict
-        A ``stats.json`` case with ``optics`` and ``imaging`` blocks.
+        A ``stats.json`` case with ``optics`` and ``imaging`` blocks (and ``noise_floor``
+        where the render file has the floor's columns).
 
     Returns
     -------
     dict or None
         ``quantity`` (the statistic compared: ``velocity.<u3>.rms_normalized``), its
-        ``optics``, ``imaging``, ``total`` and ``baseline`` values, ``dominant`` (the
-        largest of optics, imaging, baseline) and ``text``, one line for a reader.
-        ``None`` without the blocks or the numbers.
+        ``optics``, ``imaging``, ``total`` (refraction), ``noise_floor`` (None without the
+        block) and ``baseline`` values; ``dominant`` (the largest of refraction, noise
+        floor and baseline, refraction named by its larger part, optics or imaging);
+        ``refraction_over_floor`` and
+        ``refraction_over_baseline`` (None where the other term is missing or 0);
+        ``resolved`` (False where refraction is exactly 0: nothing measured); ``text``, one
+        line for a reader naming each term. ``None`` without the blocks or the numbers.
     """
     if "optics" not in case or "velocity" not in case["optics"]:
         return None
     parts = {
-        "optics": case["optics"]["velocity"]["u3"]["rms_normalized"],
-        "imaging": case["imaging"]["velocity"]["u3"]["rms_normalized"],
+        "optics": _u3(case["optics"]),
+        "imaging": _u3(case["imaging"]),
         "total": case["velocity"]["u3"]["rms_normalized"],
-        "baseline": case["baseline"]["velocity"]["u3"]["rms_normalized"],
+        "baseline": _u3(case["baseline"]),
     }
     if any(value is None for value in parts.values()):
         return None
-    contenders = {name: parts[name] for name in ("optics", "imaging", "baseline")}
+    parts["noise_floor"] = _u3(case.get("noise_floor"))
+    total = parts["total"]
+    # refraction (its larger part speaking for it) against the two terms that are not
+    # refraction: the noise floor and the baseline
+    contenders = {
+        "optics" if parts["optics"] >= parts["imaging"] else "imaging": total,
+        **{name: parts[name] for name in ("noise_floor", "baseline") if parts[name] is not None},
+    }
     dominant = max(contenders, key=contenders.get)
-    words = [f"{case['name']}: {dominant} dominates rms(ε_u3)/rms(u3)"]
+    words = [f"{case['name']}: {PART_NAMES[dominant]} dominates rms(ε_u3)/rms(u3)"]
+    if total == 0:
+        words.append("refraction not resolved (exactly 0: measured and reference images agree)")
+        for name in ("noise_floor", "baseline"):
+            if parts[name] is not None:
+                words.append(f"the {PART_NAMES[name]} {100 * parts[name]:.3g} %")
+    else:
+        words.append(f"refraction {100 * total:.3g} %")
+        for name in ("noise_floor", "baseline"):
+            words.append(_against(total, parts[name], PART_NAMES[name]))
+        if parts["noise_floor"] is None:
+            words.append("no noise floor in these render files")
     optics, imaging = parts["optics"], parts["imaging"]
     if optics > 0 and imaging > 0:
         larger, smaller = ("imaging", "optics") if imaging >= optics else ("optics", "imaging")
         words.append(f"{larger} {max(optics, imaging) / min(optics, imaging):.2g}× {smaller}")
-    if parts["total"] > 0:
-        words.append(f"baseline {parts['baseline'] / parts['total']:.2g}× refraction")
     area = case.get("area_change_p90")
     if dominant == "imaging" and area is not None:
         # the typical image may keep its size (the peak of ΔA/A at 0) while a tenth changes
@@ -112,11 +162,18 @@ def budget_verdict(case):
             else f"images keep their size (|ΔA/A| 90th percentile {area:.2g}): rendering and "
             "rounding noise"
         )
+
+    def ratio(other):
+        return None if other is None or other == 0 else total / other
+
     return {
         "quantity": "velocity.u3.rms_normalized",
         **parts,
         "dominant": dominant,
-        "text": "; ".join(words),
+        "refraction_over_floor": ratio(parts["noise_floor"]),
+        "refraction_over_baseline": ratio(parts["baseline"]),
+        "resolved": total != 0,
+        "text": "; ".join(word for word in words if word),
     }
 
 
@@ -153,7 +210,8 @@ def case_statistics(tables):
         ``n_used``, ``n_excluded``, ``position_error_*`` with ``*_ci95``, ``velocity``,
         ``acceleration`` (and ``velocity_fit``, ``acceleration_fit`` where the file has
         them), ``against_truth`` (the same groups against the truth, the paper's
-        definition; see :data:`ERROR_DEFINITIONS`), ``baseline``, ``optics`` and
+        definition; see :data:`ERROR_DEFINITIONS`), ``baseline``, ``noise_floor`` (where
+        the file has the floor's columns), ``optics`` and
         ``imaging`` (where the file has the optics columns), ``budget_verdict``,
         ``convergence``, ``sensitivity`` (:mod:`rimcl.stats.sensitivity`),
         ``area_change_peak``, ``circularity_peak``, ``rays``).
@@ -203,6 +261,9 @@ def case_statistics(tables):
         )
         for group, (symbol, table) in blocks.items()
     }
+    floor = noise_floor(tables, tracers, blocks, bootstrap)
+    if floor is not None:
+        case["noise_floor"] = floor
     if all(name in tracers for name in OPTICS_COLUMNS["x"]):
         for part in ("optics", "imaging"):
             case[part] = budget_part(
@@ -254,6 +315,11 @@ ERROR_DEFINITIONS = {
         "against_truth"
     ),
     "baseline": "reference minus truth: the measurement's own error without refraction",
+    "noise_floor": (
+        "a second exposure of the reference (independent sensor noise draws) minus the "
+        "reference: the camera's own noise, located and differenced as every other block; "
+        "the measured and reference images share their draws, so refraction holds none"
+    ),
 }
 
 METHODS = {

@@ -1,4 +1,4 @@
-"""The error blocks of one case: refraction, baseline, and the optics and imaging parts.
+"""The error blocks of one case: refraction, baseline, noise floor, optics and imaging parts.
 
 Each block summarises, per kinematic group of the render file (``velocity``,
 ``acceleration`` and the ``_fit`` ones), the relative errors of the components, the magnitude
@@ -8,7 +8,7 @@ position error as well.
 
 import numpy as np
 
-from rimcl.stats.render_file import KINEMATIC_GROUPS, OPTICS_COLUMNS
+from rimcl.stats.render_file import FLOOR_COLUMNS, KINEMATIC_GROUPS, OPTICS_COLUMNS
 from rimcl.stats.summaries import error_summary, finite_or_none, position_summary
 from rimcl.stats.tables import angle_deg, position_error_vectors, rows_of
 
@@ -101,3 +101,31 @@ def refraction_errors(tables, tracers, blocks, bootstrap):
             bootstrap,
         )
     return errors
+
+
+def noise_floor(tables, tracers, blocks, bootstrap):
+    """The ``noise_floor`` block: two independent exposures through the uniform medium.
+
+    The reference against its second exposure (``<q>_floor - <q>_ref``): what the sensor's
+    noise alone moves a position, velocity or acceleration, located and differenced as
+    every other block. None where the render file has no floor columns (an older file).
+    """
+    if not all(name in tracers for name in FLOOR_COLUMNS["x"]):
+        return None
+    block = position_summary(
+        position_error_vectors(tracers, "floor", "ref"),
+        tracers["id"],
+        tables.length,
+        tables.pixel_size,
+        bootstrap,
+    )
+    for group, (symbol, table) in blocks.items():
+        if all(name in table for name in FLOOR_COLUMNS[symbol]):
+            block[group] = vector_errors(
+                table,
+                symbol,
+                vector_columns(table, symbol, "floor"),
+                vector_columns(table, symbol, "ref"),
+                bootstrap,
+            )
+    return block

@@ -1,5 +1,5 @@
-"""The ``error_budget`` figure: optics, imaging, total refraction and baseline errors
-against G, with the verdict of each case (:func:`rimcl.stats.document.budget_verdict`) below.
+"""The ``error_budget`` figure: optics, imaging, total refraction, noise floor and baseline
+errors against G, with the verdict of each case (:func:`rimcl.stats.document.budget_verdict`) below.
 """
 
 from matplotlib.figure import Figure
@@ -19,6 +19,7 @@ BUDGET_PARTS = (
     ("imaging", ("imaging",), {"marker": "s", "color": "tab:orange"}),
     ("total refraction", (), {"marker": "D", "color": "k"}),
     ("baseline (no refraction)", ("baseline",), {"marker": "^", "color": "tab:green"}),
+    ("noise floor (two exposures)", ("noise_floor",), {"marker": "v", "color": "tab:gray"}),
 )
 
 
@@ -61,6 +62,8 @@ def draw_error_budget(cases):
     axes = [figure.add_subplot(grid[i // cols, i % cols]) for i in range(panels_count)]
     positive = [c for c in cases if c["G"] > 0]
     parts = BUDGET_PARTS if with_budget else BUDGET_PARTS[2:]
+    if not any("noise_floor" in case for case in cases):
+        parts = parts[:-1]
     panels = {
         "a": statistic_against_g(
             axes[0],
@@ -102,8 +105,9 @@ def draw_error_budget(cases):
     figure_title(
         figure,
         "Error budget: optics (mean of the traced ray image points), imaging (renderer, "
-        "threshold, centroid, noise: total minus optics, tracer by tracer),\ntheir total, "
-        "and the baseline (bars: bootstrap 95 % intervals). Imaging can lie above the total: "
+        "threshold, centroid: total minus optics, tracer by tracer),\ntheir total, the "
+        "noise floor (two independent exposures) and the baseline (bars: bootstrap 95 % "
+        "intervals). Imaging can lie above the total: "
         "where the image moves against its rays' mean (a threshold cutting a reshaped "
         "image), the two parts partly cancel in the total",
         fontsize=9,

@@ -33,7 +33,7 @@ DT_SWEEP_QUANTITIES = (
 
 
 def dt_sweep_data(stats_by_dt):
-    """Refraction and baseline ``rms(ε)/rms(truth)`` of each case against Δt.
+    """Refraction, baseline and noise-floor ``rms(ε)/rms(truth)`` of each case against Δt.
 
     Parameters
     ----------
@@ -45,10 +45,12 @@ def dt_sweep_data(stats_by_dt):
     dict
         ``dt`` (sorted), and per case name and quantity (``velocity``, ``acceleration``,
         and the ``_fit`` ones, each where two studies have it at least) the lists ``refraction``,
-        ``refraction_ci95``, ``baseline``, ``baseline_ci95`` (one entry per Δt, ``None``
-        where missing), ``dominates`` (refraction above baseline at that Δt, ``None`` where
-        unknown), ``wholly_above`` (the refraction interval wholly above the baseline's),
-        ``refraction_dominates_dt`` (the Δt values where it dominates).
+        ``refraction_ci95``, ``baseline``, ``baseline_ci95``, ``floor``, ``floor_ci95``
+        (the noise floor; one entry per Δt, ``None`` where missing), ``dominates``
+        (refraction above baseline at that Δt, ``None`` where unknown), ``wholly_above``
+        (the refraction interval wholly above the baseline's), ``refraction_dominates_dt``
+        (the Δt values where it dominates), ``above_floor`` and ``refraction_above_floor_dt``
+        (refraction above the noise floor, the same way).
     """
     dts = sorted(stats_by_dt)
     documents = [stats_by_dt[dt] for dt in dts]
@@ -67,13 +69,16 @@ def dt_sweep_data(stats_by_dt):
         by_quantity = {}
         for group, component in quantities:
             entry = {
-                key: [] for key in ("refraction", "refraction_ci95", "baseline", "baseline_ci95")
+                f"{kind}{suffix}": []
+                for kind in ("refraction", "baseline", "floor")
+                for suffix in ("", "_ci95")
             }
             for document in documents:
                 case = next((c for c in document["cases"] if c["name"] == name), {})
                 for kind, summary in (
                     ("refraction", dig(case, group, component)),
                     ("baseline", dig(case, "baseline", group, component)),
+                    ("floor", dig(case, "noise_floor", group, component)),
                 ):
                     entry[kind].append(None if summary is None else summary["rms_normalized"])
                     entry[f"{kind}_ci95"].append(
@@ -89,6 +94,14 @@ def dt_sweep_data(stats_by_dt):
             ]
             entry["refraction_dominates_dt"] = [
                 dt for dt, flag in zip(dts, entry["dominates"], strict=True) if flag
+            ]
+            # the camera's own noise: refraction above it is measured, below it is not
+            entry["above_floor"] = [
+                None if r is None or f is None else r > f
+                for r, f in zip(entry["refraction"], entry["floor"], strict=True)
+            ]
+            entry["refraction_above_floor_dt"] = [
+                dt for dt, flag in zip(dts, entry["above_floor"], strict=True) if flag
             ]
             by_quantity[f"{group}.{component}"] = entry
         cases[name] = by_quantity
@@ -106,7 +119,8 @@ def _time_scale(stats_by_dt):
 
 
 def draw_dt_sweep(stats_by_dt):
-    """The Δt sweep figure: refraction (solid) and baseline (dashed) against Δt per case.
+    """The Δt sweep figure: refraction (solid), baseline (dashed) and noise floor (dotted)
+    against Δt per case.
 
     Below the panels, one line per case lists the Δt at which refraction exceeds the
     baseline, for each quantity. Where the studies record the field's time scale, Δt is
@@ -136,13 +150,16 @@ def draw_dt_sweep(stats_by_dt):
     characters = int(PANEL_SIZE[0] * cols * 72 / (0.55 * 7))
     lines = []
     for name in names:
-        parts = []
-        for quantity in quantities:
-            dominated = data["cases"][name][quantity]["refraction_dominates_dt"]
-            listed = ", ".join(shown(dt) for dt in dominated) if dominated else "none"
-            parts.append(f"{quantity}: {listed}")
-        line = f"{name}: refraction above baseline at Δt = " + "; ".join(parts)
-        lines += textwrap.wrap(line, characters, subsequent_indent="    ")
+        for key, words in (
+            ("refraction_dominates_dt", "above the baseline"),
+            ("refraction_above_floor_dt", "above the noise floor"),
+        ):
+            parts = []
+            for quantity in quantities:
+                where = data["cases"][name][quantity][key]
+                parts.append(f"{quantity}: " + (", ".join(shown(dt) for dt in where) or "none"))
+            line = f"{name}: refraction {words} at Δt = " + "; ".join(parts)
+            lines += textwrap.wrap(line, characters, subsequent_indent="    ")
     text_height = 0.3 + 0.17 * len(lines)
     figure = Figure(
         figsize=(PANEL_SIZE[0] * cols + 2.0, PANEL_SIZE[1] * rows + text_height),
@@ -155,7 +172,8 @@ def draw_dt_sweep(stats_by_dt):
         ax = figure.add_subplot(grid[index // cols, index % cols])
         for name, color in zip(names, colors, strict=True):
             entry = data["cases"][name][quantity]
-            for kind, marker in (("refraction", "o"), ("baseline", "s")):
+            styles = {"refraction": ("o", "-"), "baseline": ("s", "--"), "floor": ("^", ":")}
+            for kind, (marker, line) in styles.items():
                 points = [
                     (dt, v, ci)
                     for dt, v, ci in zip(
@@ -166,7 +184,7 @@ def draw_dt_sweep(stats_by_dt):
                 if not points:
                     continue
                 dts, values, intervals = zip(*points, strict=True)
-                ax.plot(dts, values, "-" if kind == "refraction" else "--", color=color, lw=1)
+                ax.plot(dts, values, line, color=color, lw=1)
                 errorbars(
                     ax,
                     dts,
@@ -198,6 +216,15 @@ def draw_dt_sweep(stats_by_dt):
         Line2D(
             [], [], color="k", marker="s", mfc="white", linestyle="--", label="baseline (u^ref − u)"
         ),
+        Line2D(
+            [],
+            [],
+            color="k",
+            marker="^",
+            mfc="white",
+            linestyle=":",
+            label="noise floor (two exposures)",
+        ),
     ]
     figure.legend(handles=handles, loc="outside right upper", fontsize=7)
     text_ax = figure.add_subplot(grid[rows, :])
@@ -213,7 +240,8 @@ def draw_dt_sweep(stats_by_dt):
     )
     figure_title(
         figure,
-        "Refraction against baseline with the time step (bars: bootstrap 95 % intervals)",
+        "Refraction against baseline and noise floor with the time step "
+        "(bars: bootstrap 95 % intervals)",
         fontsize=9,
     )
     finish_axes(figure)

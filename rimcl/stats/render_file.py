@@ -59,6 +59,13 @@ OPTICS_COLUMNS = {
     "u": ("u2_opt", "u3_opt", "u2_opt_ref", "u3_opt_ref"),
     "a": ("a2_opt", "a3_opt", "a2_opt_ref", "a3_opt_ref"),
 }
+#: Columns of the noise floor, all or none of a group: the reference exposed a second
+#: time with independent sensor noise (``flags_floor``: that exposure's flags, tracers only).
+FLOOR_COLUMNS = {
+    "x": ("x2_floor", "x3_floor", "flags_floor"),
+    "u": ("u2_floor", "u3_floor"),
+    "a": ("a2_floor", "a3_floor"),
+}
 #: Suffixes of the columns of the tracers located again at other thresholds in the same
 #: images (:data:`rimcl.imaging.frames.THRESHOLD_VARIANTS`).
 THRESHOLD_SUFFIXES = tuple(suffix for suffix, _ in THRESHOLD_VARIANTS)
@@ -237,7 +244,11 @@ def load_render(path):
             raise RimclError(f"{path}: group 'tracers' is missing (not a rimcl render file?)")
         variants = [threshold_columns("x", suffix) for suffix in THRESHOLD_SUFFIXES]
         tracers = _read_group(
-            h5file, "tracers", TRACER_COLUMNS, path, (OPTICS_COLUMNS["x"], TRUTH_COLUMNS, *variants)
+            h5file,
+            "tracers",
+            TRACER_COLUMNS,
+            path,
+            (OPTICS_COLUMNS["x"], FLOOR_COLUMNS["x"], TRUTH_COLUMNS, *variants),
         )
         if tracers["id"].size == 0:
             raise RimclError(f"{path}: the tracer table is empty")
@@ -247,7 +258,11 @@ def load_render(path):
             if group in h5file:
                 variants = [threshold_columns(symbol, suffix) for suffix in THRESHOLD_SUFFIXES]
                 kinematic[group] = _read_group(
-                    h5file, group, columns, path, (OPTICS_COLUMNS[symbol], *variants)
+                    h5file,
+                    group,
+                    columns,
+                    path,
+                    (OPTICS_COLUMNS[symbol], FLOOR_COLUMNS[symbol], *variants),
                 )
             elif needed_from is not None and frames >= needed_from:
                 raise RimclError(

@@ -94,11 +94,17 @@ def _group_units(table, symbol, factors):
     columns = {kind: vector_columns(table, symbol, kind) for kind in ("true", "ref", "meas")}
     usable = np.logical_and.reduce([np.isfinite(c) for pair in columns.values() for c in pair])
     columns = {kind: (pair[0][usable], pair[1][usable]) for kind, pair in columns.items()}
+    floor = None
+    if f"{symbol}2_floor" in table:  # the noise floor: its finite rows among the usable
+        pairs = zip(vector_columns(table, symbol, "floor"), columns["ref"], strict=True)
+        floor = tuple(f[usable] - r for f, r in pairs)
     for component, k in ((f"{symbol}2", 0), (f"{symbol}3", 1), ("vector", None)):
         entry = {"rms_truth": both(_pick(columns["true"], k))}
         for name, measured, reference in _ERRORS:
             a, b = columns[measured], columns[reference]
             entry[f"rms_{name}"] = both(_pick((a[0] - b[0], a[1] - b[1]), k))
+        if floor is not None:
+            entry["rms_noise_floor"] = both(_pick(floor, k))
         block[component] = entry
     return block
 
@@ -127,7 +133,9 @@ def case_units(tables, length_m=None, time_s=None, case=None):
         ``scales`` (:func:`scales`), ``position`` (peak and median ``|ε_x|`` in ``L``,
         µm and px), and per kinematic group and component (``u2``, ``u3``, ``vector``):
         ``rms_truth``, ``rms_total`` (measured − true), ``rms_refraction`` (measured −
-        reference) and ``rms_baseline`` (reference − true), each ``{"field", "mm_s",
+        reference), ``rms_baseline`` (reference − true) and, where the render file has
+        the floor's columns, ``rms_noise_floor`` (second reference exposure − reference),
+        each ``{"field", "mm_s",
         "px_frame"}`` for velocities and ``{"field", "m_s2"}`` for accelerations, over the
         tracers the statistics use; ``displacement_rms_px``, the rms tracer displacement
         per frame.
@@ -197,7 +205,7 @@ def tidy_rows(stats):
             value = case.get(f"position_error_{key}_over_L")
             lo, hi = case.get(f"position_error_{key}_over_L_ci95") or (None, None)
             rows.append((name, "position_error", "magnitude", key, value, lo, hi, unit))
-        for block in ("", "baseline", "optics", "imaging"):
+        for block in ("", "baseline", "noise_floor", "optics", "imaging"):
             source = case if not block else case.get(block) or {}
             for group in _GROUPS:
                 for component, summary in (source.get(group) or {}).items():

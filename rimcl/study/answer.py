@@ -92,7 +92,13 @@ def answer_lines(stats):
                 f"velocity {_speed(truth, 'mm_s')}; refraction alone is "
                 f"{_speed(velocity['rms_refraction'], 'mm_s')}, the measurement without "
                 f"refraction {_speed(velocity['rms_baseline'], 'mm_s')}"
-                f" ({'sliding fit' if group.endswith('fit') else 'finite differences'})"
+                + (
+                    f", the camera's noise alone (noise floor) "
+                    f"{_speed(velocity['rms_noise_floor'], 'mm_s')}"
+                    if "rms_noise_floor" in velocity
+                    else ""
+                )
+                + f" ({'sliding fit' if group.endswith('fit') else 'finite differences'})"
             )
         _, acceleration = _group(units, "acceleration")
         if acceleration is not None:

@@ -81,14 +81,20 @@ def _write_reference(group, reference):
     for name in ("true_velocity", "true_acceleration"):
         if getattr(reference, name) is not None:
             group.create_dataset(name, data=getattr(reference, name))
-    images = group.create_group("images")
-    for name, values in reference.images.items():
-        images.create_dataset(name, data=values)
+    for group_name, columns in (("images", reference.images), ("floor", reference.floor_images)):
+        images = group.create_group(group_name)
+        for name, values in columns.items():
+            images.create_dataset(name, data=values)
 
 
 def _read_reference(group):
     from rimcl.ptv.render_file import Reference
 
+    if "floor" not in group:
+        raise RimclError(
+            f"{group.file.filename}: a shard file of an older rimcl (no noise-floor exposure); "
+            "rerun the study with --force"
+        )
     return Reference(
         key=json.loads(group.attrs["key"]),
         tracks=group["tracks"][()],
@@ -96,6 +102,7 @@ def _read_reference(group):
         true_acceleration=group["true_acceleration"][()] if "true_acceleration" in group else None,
         outside=group["outside"][()],
         images={name: values[()] for name, values in group["images"].items()},
+        floor_images={name: values[()] for name, values in group["floor"].items()},
         ray_counts=json.loads(group.attrs["ray_counts"]),
         ray_steps=int(group.attrs["ray_steps"]),
     )
