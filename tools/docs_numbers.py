@@ -1,0 +1,630 @@
+"""Regenerate the numbers the documentation quotes from runs, and write them into the pages.
+
+Every number in ``README.md`` and ``docs/**/*.md`` that comes from a run of rimcl is marked
+in the page by an HTML comment right after it, naming its key::
+
+    | C0 | 0.013<!--n:study.C0.u3.optics--> % | ...
+
+and every program output quoted as a block is preceded by ``<!--block:KEY-->``. The
+comments are invisible on GitHub and in the built site. This script
+
+- ``run``: runs what the pages quote (the default study, the water-tank tutorial's study,
+  the default lens's closed forms, …) at the sizes the pages state, and writes every number
+  to ``docs/_static/numbers.json`` with the machine, the load, the versions and the hash of
+  the configuration that made them (:func:`config_hash`);
+- ``apply``: rewrites every marked number and block of the pages from that file;
+- ``check``: exits 1 where a page differs from the file or the file from the current
+  configuration (``tests/test_docs_numbers.py`` does the same, without running anything).
+
+Usage, from the repository root::
+
+    python tools/docs_numbers.py run            # full size: ~15 min on a quiet 2-core CPU
+    python tools/docs_numbers.py run --small    # 12 tracers per study: a smoke test
+    python tools/docs_numbers.py apply          # then read the diff (git diff): prose around
+                                                # changed numbers may need a new verdict
+    python tools/docs_numbers.py check
+
+``run --only study,lens`` reruns some jobs and keeps the others' numbers. A job whose
+output lacks a key records ``null`` (written "n/a" in the pages) and is listed at the end,
+so that a renamed ``stats.json`` key is seen, not silently skipped.
+"""
+
+import argparse
+import hashlib
+import itertools
+import json
+import math
+import os
+import platform
+import re
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+NUMBERS = ROOT / "docs" / "_static" / "numbers.json"
+SCHEMA = 1
+
+#: ``0.62<!--n:key-->``: the number right before the comment (sign, digits, exponent).
+NUMBER_MARK = re.compile(r"(n/a|[-−+]?\d[\d,]*(?:\.\d+)?(?:e[-−+]?\d+)?)<!--n:([\w.:=+\-]+)-->")
+#: ``<!--block:key-->`` then a fenced block: the block's body is the program output ``key``.
+BLOCK_MARK = re.compile(r"<!--block:([\w.:=+\-]+)-->\n(```[a-z]*\n)(.*?)(```)", re.DOTALL)
+
+CASES = ("C0", "C1", "C2", "C3", "C4")
+
+
+def pages():
+    """The Markdown pages that may quote numbers: README.md and docs/**/*.md."""
+    found = [ROOT / "README.md"]
+    found += sorted(
+        p
+        for p in (ROOT / "docs").rglob("*.md")
+        if "_build" not in p.parts and "_generated" not in p.parts
+    )
+    return found
+
+
+# --- number formatting ------------------------------------------------------------------------
+
+
+def fmt(value, digits=2, scale=1.0, decimals=None):
+    """A number as the pages write it.
+
+    Parameters
+    ----------
+    value : float or None
+        None or non-finite: ``n/a``.
+    digits : int
+        Significant digits (``decimals`` overrides: that many after the point).
+    scale : float
+        Multiplied in first (100 for a percentage).
+
+    Returns
+    -------
+    str
+        Plain decimals from 1e-3 to 1e5 (``0.013``, ``370``), else ``3.8e-7``.
+    """
+    if value is None or not math.isfinite(float(value)):
+        return "n/a"
+    v = float(value) * scale
+    if decimals is not None:
+        return f"{v:.{decimals}f}"
+    if v == 0:
+        return "0"
+    exponent = math.floor(math.log10(abs(v)))
+    if exponent < -3 or exponent >= 5:
+        mantissa = f"{v / 10**exponent:.{digits - 1}f}"
+        if float(mantissa) >= 10:  # 9.96 → 10 at 2 digits: one more power
+            exponent += 1
+            mantissa = f"{v / 10**exponent:.{digits - 1}f}"
+        return f"{mantissa}e{exponent}"
+    rounded = round(v, digits - 1 - exponent)
+    places = max(0, digits - 1 - exponent)
+    return f"{rounded:.{places}f}"
+
+
+# --- reading outputs --------------------------------------------------------------------------
+
+
+def dig(document, path):
+    """The value at a dotted path; ``cases[C0]`` picks the case named C0. None if absent."""
+    node = document
+    for part in path.split("."):
+        match = re.fullmatch(r"(\w+)\[(.+)\]", part)
+        try:
+            if match:
+                node = node[match[1]]
+                node = next(
+                    c for c in node if c.get("name") == match[2] or c.get("case") == match[2]
+                )
+            elif isinstance(node, list):
+                node = node[int(part)]
+            else:
+                node = node[part]
+        except (KeyError, IndexError, StopIteration, TypeError, ValueError):
+            return None
+    return node
+
+
+class Collector:
+    """The numbers of one run: ``put`` a value with its page format, keep what was missing."""
+
+    def __init__(self):
+        self.numbers = {}
+        self.blocks = {}
+        self.missing = []
+
+    def put(self, key, value, digits=2, scale=1.0, unit="", source="", decimals=None):
+        if value is None:
+            self.missing.append(f"{key} ({source})")
+        self.numbers[key] = {
+            "value": value,
+            "text": fmt(value, digits, scale, decimals),
+            "unit": unit,
+            "source": source,
+        }
+
+    def put_from(self, key, document, path, where, **kw):
+        self.put(key, dig(document, path), source=f"{where}: {path}", **kw)
+
+
+# --- the jobs ---------------------------------------------------------------------------------
+
+
+def _rimcl():
+    here = Path(sys.executable).with_name("rimcl")
+    return [str(here)] if here.exists() else [sys.executable, "-m", "rimcl"]
+
+
+def _run(argv, log):
+    """Run one rimcl command; its wall and CPU seconds (children's user + system)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    with open(log, "w", encoding="utf-8") as out:
+        done = subprocess.run(_rimcl() + argv, stdout=out, stderr=subprocess.STDOUT, cwd=ROOT)
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    if done.returncode != 0:
+        tail = Path(log).read_text(encoding="utf-8")[-2000:]
+        raise RuntimeError(f"rimcl {' '.join(argv)} failed ({done.returncode}):\n{tail}")
+    return wall, cpu
+
+
+def _stats(directory):
+    return json.loads((Path(directory) / "stats.json").read_text(encoding="utf-8"))
+
+
+def _budget(c, stats, prefix, where, cases):
+    """The error-budget table of a study: rms(ε_u3)/rms(u3) of the differences, in %."""
+    for case in cases:
+        base = f"cases[{case}]"
+        for part, path in (
+            ("optics", "optics.velocity.u3"),
+            ("imaging", "imaging.velocity.u3"),
+            ("total", "velocity.u3"),
+            ("baseline", "baseline.velocity.u3"),
+        ):
+            key = f"{prefix}.{case}.u3.{part}"
+            c.put_from(
+                key, stats, f"{base}.{path}.rms_normalized", where, digits=2, scale=100, unit="%"
+            )
+            for end, index in (("lo", 0), ("hi", 1)):
+                c.put_from(
+                    f"{key}.{end}",
+                    stats,
+                    f"{base}.{path}.ci95.rms_normalized.{index}",
+                    where,
+                    digits=2,
+                    scale=100,
+                    unit="%",
+                )
+        c.put_from(f"{prefix}.{case}.used", stats, f"{base}.n_used", where, decimals=0)
+        c.put_from(f"{prefix}.{case}.tracers", stats, f"{base}.n_tracers", where, decimals=0)
+        for flag in ("below_threshold", "split", "no_rays"):
+            c.put_from(
+                f"{prefix}.{case}.excluded.{flag}",
+                stats,
+                f"{base}.n_excluded.{flag}",
+                where,
+                decimals=0,
+            )
+        c.put_from(
+            f"{prefix}.{case}.position_median_over_L",
+            stats,
+            f"{base}.position_error_median_over_L",
+            where,
+            digits=2,
+        )
+        c.put_from(
+            f"{prefix}.{case}.u3_fit.baseline",
+            stats,
+            f"{base}.baseline.velocity_fit.u3.rms_normalized",
+            where,
+            digits=2,
+            scale=100,
+            unit="%",
+        )
+        c.put_from(
+            f"{prefix}.{case}.a3_fit.baseline",
+            stats,
+            f"{base}.baseline.acceleration_fit.a3.rms_normalized",
+            where,
+            digits=2,
+            scale=100,
+            unit="%",
+        )
+    # the growth of the optics part from case to case (G grows ×8.4, ×11.8)
+    for a, b in itertools.pairwise(cases):
+        x = dig(stats, f"cases[{a}].optics.velocity.u3.rms_normalized")
+        y = dig(stats, f"cases[{b}].optics.velocity.u3.rms_normalized")
+        ratio = y / x if x and y is not None else None
+        c.put(
+            f"{prefix}.optics_ratio.{a}-{b}", ratio, digits=3, source=f"{where}: optics u3 {b}/{a}"
+        )
+    dts = dig(stats, "dt_sweep.dt") or [None]
+    for end, index in (("first", 0), ("last", -1)):
+        c.put(f"{prefix}.dt_sweep.dt.{end}", dts[index], digits=2, source=f"{where}: dt_sweep.dt")
+    for case in cases:
+        x = dig(stats, f"cases[{case}].optics.velocity.u3.rms_normalized")
+        y = dig(stats, f"cases[{case}].imaging.velocity.u3.rms_normalized")
+        ratio = y / x if x and y is not None else None
+        c.put(
+            f"{prefix}.{case}.imaging_over_optics",
+            ratio,
+            digits=2,
+            source=f"{where}: u3 imaging/optics",
+        )
+        # the Δt sweep: the baseline of u3 at the first and the last frame spacing
+        sweep = dig(stats, f"dt_sweep.cases.{case}") or {}
+        baseline = (sweep.get("velocity.u3") or {}).get("baseline") or [None]
+        for end, index in (("first", 0), ("last", -1)):
+            c.put(
+                f"{prefix}.{case}.dt_sweep.u3_baseline.{end}",
+                baseline[index],
+                digits=3,
+                scale=100,
+                unit="%",
+                source=f"{where}: dt_sweep.cases.{case}['velocity.u3'].baseline[{index}]",
+            )
+
+
+def _lens(c, scale, work):
+    """The default lens camera's closed forms (no run): what every page says of the camera."""
+    from rimcl.optics.camera import Scene
+    from rimcl.scene.config import MeasureConfig
+    from rimcl.scene.load import load_scene
+
+    scene = load_scene()
+    box = Scene(0.0, 2 * math.pi, (0.0, 0.0), (2 * math.pi, 2 * math.pi), True)
+    camera = MeasureConfig.from_scene(scene, "C1").camera.build(box, 1.0)
+    where = "default scene, LensCamera"
+    c.put("lens.f_number", camera.f_number, decimals=0, source=where)
+    c.put("lens.na", camera.numerical_aperture, digits=2, source=where)
+    c.put("lens.aperture_mm", camera.aperture_mm, digits=3, unit="mm", source=where)
+    c.put("lens.dof_mm", camera.depth_of_field_mm, digits=2, unit="mm", source=where)
+    c.put("lens.diffraction_um", camera.diffraction_diameter_um, digits=3, unit="µm", source=where)
+    c.put("lens.image_um", camera.image_diameter_um, digits=3, unit="µm", source=where)
+    c.put("lens.image_px", 4 * camera.psf_sigma_px, digits=3, unit="px", source=where)
+    c.put("lens.image_px2", 4 * camera.psf_sigma_px, digits=2, unit="px", source=where)
+    c.put("lens.sigma_px", camera.psf_sigma_px, digits=2, unit="px", source=where)
+    c.put("sample.time_s", scene["field"]["time_s"], digits=2, unit="s", source="shipped sample")
+    dt = scene["time"]["dt"] or 0.02
+    c.put(
+        "sample.dt_ms",
+        dt * scene["field"]["time_s"] * 1e3,
+        digits=2,
+        unit="ms",
+        source="shipped sample",
+    )
+    return {"wall_s": 0.0, "cpu_s": 0.0}
+
+
+def _study(c, scale, work):
+    """``rimcl study --out study-out``: the default study (400 tracers at full size)."""
+    out = work / "study-out"
+    argv = ["study", "--out", str(out), "--no-progress"]
+    if scale == "small":
+        argv += ["--tracers", "12", "--no-figures"]
+    wall, cpu = _run(argv, work / "study.log")
+    stats = _stats(out)
+    where = "rimcl study --out study-out, stats.json"
+    _budget(c, stats, "study", where, CASES)
+    c.put("time.study.wall_s", wall, digits=2, unit="s", source="wall clock of the whole command")
+    c.put("time.study.cpu_s", cpu, digits=2, unit="s", source="CPU seconds of the command")
+    summary = (out / "summary.md").read_text(encoding="utf-8")
+    c.blocks["study.warnings"] = _section(summary, "## Warnings")
+    return {
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "argv": argv,
+        "device": dig(stats, "config.inputs.0.device"),
+    }
+
+
+def _tank(c, scale, work):
+    """The water-tank tutorial: ``rimcl study data_samples/scenes/water_tank.toml --tracers 30``."""
+    out = work / "tank"
+    tracers = "30" if scale == "full" else "8"
+    argv = [
+        "study",
+        "data_samples/scenes/water_tank.toml",
+        "--out",
+        str(out),
+        "--tracers",
+        tracers,
+        "--no-progress",
+    ]
+    wall, cpu = _run(argv, work / "tank.log")
+    stats = _stats(out)
+    where = "water-tank tutorial, stats.json"
+    for case in ("dT=0.3", "dT=3", "dT=30"):
+        base = f"cases[{case}].units"
+        c.put_from(
+            f"tank.{case}.position_um",
+            stats,
+            f"{base}.position.median.um",
+            where,
+            digits=3,
+            unit="µm",
+        )
+        c.put_from(
+            f"tank.{case}.position_px",
+            stats,
+            f"{base}.position.median.px",
+            where,
+            digits=3,
+            unit="px",
+        )
+        for part in ("rms_total", "rms_refraction", "rms_baseline", "rms_truth"):
+            c.put_from(
+                f"tank.{case}.u_fit.{part}",
+                stats,
+                f"{base}.velocity_fit.vector.{part}.mm_s",
+                where,
+                digits=3,
+                unit="mm/s",
+            )
+        total = dig(stats, f"{base}.velocity_fit.vector.rms_total.mm_s")
+        truth = dig(stats, f"{base}.velocity_fit.vector.rms_truth.mm_s")
+        share = total / truth if total is not None and truth else None
+        c.put(f"tank.{case}.u_fit.total_pct", share, digits=2, scale=100, unit="%", source=where)
+    c.put(
+        "time.tank.wall_s", wall, digits=2, unit="s", source="wall clock of the tutorial's command"
+    )
+    summary = (out / "summary.md").read_text(encoding="utf-8")
+    c.blocks["tank.answer"] = (
+        _section(summary, "## Your answer")
+        + "\n"
+        + _section(summary, "## Warnings")
+        + "\n"
+        + _section(summary, "## The lens")
+    )
+    csv = out / "stats.csv"
+    if csv.exists():
+        c.blocks["tank.csv"] = _fit_table(csv)
+    return {"wall_s": wall, "cpu_s": cpu, "argv": argv}
+
+
+def _section(text, heading):
+    """A ``## heading`` section of a summary.md, up to the next ``## `` (the heading kept)."""
+    lines = text.splitlines()
+    try:
+        start = next(i for i, line in enumerate(lines) if line.strip() == heading)
+    except StopIteration:
+        return f"{heading}\n\n(none)\n"
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
+    return "\n".join(lines[start:end]).rstrip() + "\n"
+
+
+def _fit_table(csv):
+    """The tutorial's pandas table: velocity_fit, vector, mm/s, one row per case."""
+    try:
+        import pandas as pd
+    except ImportError:
+        return "(pandas not installed)\n"
+    table = pd.read_csv(csv)
+    rows = table[(table.quantity == "velocity_fit") & (table.component == "vector")]
+    return (
+        rows[rows.unit == "mm/s"]
+        .pivot(index="case", columns="statistic", values="value")
+        .to_string()
+        + "\n"
+    )
+
+
+#: name: (function, what it runs); ``run`` runs them in this order.
+JOBS = {
+    "lens": (_lens, "the default lens's closed forms (no run)"),
+    "study": (_study, "rimcl study --out study-out (the default study)"),
+    "tank": (_tank, "rimcl study data_samples/scenes/water_tank.toml --tracers 30"),
+}
+
+
+# --- provenance -------------------------------------------------------------------------------
+
+
+def config_hash():
+    """Hash of what decides the numbers besides the code: the default scene (every key and
+    default, as ``rimcl study --print-default-scene`` prints it), the shipped scenes, the
+    shipped sample and the job definitions of this script.
+
+    Returns
+    -------
+    str
+        sha256, hex.
+    """
+    from rimcl.fields.sample import sample_path
+    from rimcl.scene.load import default_scene_text
+
+    digest = hashlib.sha256(default_scene_text().encode())
+    for scene in sorted((ROOT / "data_samples" / "scenes").glob("*.toml")):
+        digest.update(scene.name.encode() + scene.read_bytes())
+    digest.update(Path(sample_path()).read_bytes())
+    for name, (function, what) in JOBS.items():
+        digest.update(f"{name}:{what}:{function.__doc__}".encode())
+    return digest.hexdigest()
+
+
+def _machine():
+    cpu = platform.processor()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "platform": platform.platform()}
+
+
+def _versions():
+    from rimcl.core.provenance import versions
+
+    return versions()
+
+
+def _git():
+    try:
+        return subprocess.run(
+            ["git", "describe", "--always", "--dirty"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+
+
+# --- commands ---------------------------------------------------------------------------------
+
+
+def load_numbers(path=NUMBERS):
+    return json.loads(Path(path).read_text(encoding="utf-8"))
+
+
+def run(scale, only=None, keep=None):
+    previous = load_numbers() if NUMBERS.exists() else {"numbers": {}, "blocks": {}, "jobs": {}}
+    names = list(JOBS) if not only else only
+    unknown = set(names) - set(JOBS)
+    if unknown:
+        sys.exit(f"unknown job(s) {sorted(unknown)}; choose from {', '.join(JOBS)}")
+    work = Path(keep) if keep else Path(tempfile.mkdtemp(prefix="rimcl-docs-numbers-"))
+    work.mkdir(parents=True, exist_ok=True)
+    collector = Collector()
+    jobs = {k: v for k, v in previous.get("jobs", {}).items() if k not in names}
+    numbers = {k: v for k, v in previous.get("numbers", {}).items() if k.split(".")[0] not in names}
+    started = time.perf_counter()
+    for name in names:
+        function, what = JOBS[name]
+        load = os.getloadavg()[0]
+        print(f"[{name}] {what} ...", flush=True)
+        info = function(collector, scale, work)
+        info.update(
+            scale=scale, load_before=round(load, 1), load_after=round(os.getloadavg()[0], 1)
+        )
+        info["finished"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
+        jobs[name] = info
+        print(f"[{name}] {info['wall_s']:.0f} s wall, {info['cpu_s']:.0f} s CPU", flush=True)
+    numbers.update(collector.numbers)
+    blocks = {**previous.get("blocks", {}), **collector.blocks}
+    document = {
+        "schema": SCHEMA,
+        "made_by": "tools/docs_numbers.py run" + (" --small" if scale == "small" else ""),
+        "config_hash": config_hash(),
+        "git": _git(),
+        "machine": _machine(),
+        "versions": _versions(),
+        "jobs": jobs,
+        "missing": collector.missing,
+        "numbers": dict(sorted(numbers.items())),
+        "blocks": dict(sorted(blocks.items())),
+    }
+    NUMBERS.parent.mkdir(parents=True, exist_ok=True)
+    tmp = NUMBERS.with_suffix(".tmp")
+    tmp.write_text(json.dumps(document, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
+    tmp.replace(NUMBERS)
+    if not keep:
+        shutil.rmtree(work, ignore_errors=True)
+    print(
+        f"wrote {NUMBERS.relative_to(ROOT)}: {len(numbers)} numbers, {len(blocks)} blocks, "
+        f"{time.perf_counter() - started:.0f} s"
+    )
+    for item in collector.missing:
+        print(f"  missing: {item}")
+
+
+def render(text, document):
+    """The page ``text`` with every marked number and block taken from ``document``."""
+    numbers, blocks = document["numbers"], document["blocks"]
+
+    def number(match):
+        key = match[2]
+        return (numbers[key]["text"] if key in numbers else match[1]) + f"<!--n:{key}-->"
+
+    def block(match):
+        key = match[1]
+        body = blocks.get(key, match[3])
+        return f"<!--block:{key}-->\n{match[2]}{body}{match[4]}"
+
+    return BLOCK_MARK.sub(block, NUMBER_MARK.sub(number, text))
+
+
+def differences(document):
+    """Every marked number or block that differs from ``document``, and unknown keys."""
+    problems = []
+    for page in pages():
+        text = page.read_text(encoding="utf-8")
+        name = page.relative_to(ROOT)
+        for match in NUMBER_MARK.finditer(text):
+            entry = document["numbers"].get(match[2])
+            if entry is None:
+                problems.append(f"{name}: unknown number key {match[2]}")
+            elif entry["text"] != match[1].replace("−", "-"):
+                problems.append(f"{name}: {match[2]} is {match[1]}, the run gave {entry['text']}")
+        for match in BLOCK_MARK.finditer(text):
+            body = document["blocks"].get(match[1])
+            if body is None:
+                problems.append(f"{name}: unknown block key {match[1]}")
+            elif body != match[3]:
+                problems.append(f"{name}: block {match[1]} differs from the run's output")
+        if "<!--n:" in NUMBER_MARK.sub("", text):
+            problems.append(f"{name}: a number mark without a number right before it")
+    return problems
+
+
+def apply():
+    document = load_numbers()
+    for page in pages():
+        text = page.read_text(encoding="utf-8")
+        new = render(text, document)
+        if new != text:
+            page.write_text(new, encoding="utf-8")
+            print(f"updated {page.relative_to(ROOT)}")
+
+
+def check():
+    document = load_numbers()
+    problems = differences(document)
+    if document["config_hash"] != config_hash():
+        problems.append(
+            "docs/_static/numbers.json was made from another configuration: run it again"
+        )
+    for problem in problems:
+        print(problem)
+    return 1 if problems else 0
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    runner = sub.add_parser("run", help="run the jobs and write docs/_static/numbers.json")
+    runner.add_argument(
+        "--small", action="store_true", help="12 tracers: a smoke test, not for the pages"
+    )
+    runner.add_argument("--only", help="comma-separated jobs: " + ", ".join(JOBS))
+    runner.add_argument("--keep", help="keep the runs' outputs in this folder")
+    sub.add_parser("apply", help="write the numbers of docs/_static/numbers.json into the pages")
+    sub.add_parser("check", help="exit 1 where a page or the file is out of date")
+    args = parser.parse_args(argv)
+    if args.command == "run":
+        run(
+            "small" if args.small else "full",
+            args.only.split(",") if args.only else None,
+            args.keep,
+        )
+        return 0
+    if args.command == "apply":
+        apply()
+        return 0
+    return check()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
