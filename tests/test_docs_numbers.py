@@ -12,7 +12,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def tool():
-    spec = importlib.util.spec_from_file_location("docs_numbers", ROOT / "tools" / "docs_numbers.py")
+    spec = importlib.util.spec_from_file_location(
+        "docs_numbers", ROOT / "tools" / "docs_numbers.py"
+    )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -39,7 +41,7 @@ def test_the_numbers_were_made_by_the_current_configuration(tool, numbers):
     assert numbers["machine"]["cpu"] and numbers["machine"]["cores"] >= 1
     assert numbers["versions"]["rimcl"]
     for job in numbers["jobs"].values():
-        assert job["wall_s"] >= 0 and "load_before" in job
+        assert not job.get("reused") and job["wall_s"] >= 0 and "load_before" in job
 
 
 def test_the_pages_quote_full_size_runs(numbers):
@@ -61,6 +63,8 @@ def test_the_pages_quote_full_size_runs(numbers):
         (float("nan"), {}, "n/a"),
         (0.0, {}, "0"),
         (75.4, {}, "75"),
+        (0.0026, {}, "0.0026"),
+        (0.0026, {"sci": True}, "2.6e-3"),
     ],
 )
 def test_numbers_are_written_as_the_pages_write_them(tool, value, kw, text):

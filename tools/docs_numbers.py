@@ -52,6 +52,8 @@ SCHEMA = 1
 
 #: ``0.62<!--n:key-->``: the number right before the comment (sign, digits, exponent).
 NUMBER_MARK = re.compile(r"(n/a|[-−+]?\d[\d,]*(?:\.\d+)?(?:e[-−+]?\d+)?)<!--n:([\w.:=+\-]+)-->")
+#: ``baseline<!--t:key-->``: a word a run decides (the dominant part of a budget).
+WORD_MARK = re.compile(r"([A-Za-z_]+)<!--t:([\w.:=+\-]+)-->")
 #: ``<!--block:key-->`` then a fenced block: the block's body is the program output ``key``.
 BLOCK_MARK = re.compile(r"<!--block:([\w.:=+\-]+)-->\n(```[a-z]*\n)(.*?)(```)", re.DOTALL)
 
@@ -72,7 +74,7 @@ def pages():
 # --- number formatting ------------------------------------------------------------------------
 
 
-def fmt(value, digits=2, scale=1.0, decimals=None):
+def fmt(value, digits=2, scale=1.0, decimals=None, sci=False):
     """A number as the pages write it.
 
     Parameters
@@ -83,6 +85,8 @@ def fmt(value, digits=2, scale=1.0, decimals=None):
         Significant digits (``decimals`` overrides: that many after the point).
     scale : float
         Multiplied in first (100 for a percentage).
+    sci : bool
+        Always ``mantissa e exponent`` (a column of small magnitudes).
 
     Returns
     -------
@@ -97,7 +101,7 @@ def fmt(value, digits=2, scale=1.0, decimals=None):
     if v == 0:
         return "0"
     exponent = math.floor(math.log10(abs(v)))
-    if exponent < -3 or exponent >= 5:
+    if sci or exponent < -3 or exponent >= 5:
         mantissa = f"{v / 10**exponent:.{digits - 1}f}"
         if float(mantissa) >= 10:  # 9.96 → 10 at 2 digits: one more power
             exponent += 1
@@ -139,13 +143,22 @@ class Collector:
         self.blocks = {}
         self.missing = []
 
-    def put(self, key, value, digits=2, scale=1.0, unit="", source="", decimals=None):
+    def put(self, key, value, digits=2, scale=1.0, unit="", source="", decimals=None, sci=False):
         if value is None:
             self.missing.append(f"{key} ({source})")
         self.numbers[key] = {
             "value": value,
-            "text": fmt(value, digits, scale, decimals),
+            "text": fmt(value, digits, scale, decimals, sci),
             "unit": unit,
+            "source": source,
+        }
+
+    def put_word(self, key, word, source=""):
+        if word is None:
+            self.missing.append(f"{key} ({source})")
+        self.numbers[key] = {
+            "value": word,
+            "text": "n/a" if word is None else str(word),
             "source": source,
         }
 
@@ -161,8 +174,16 @@ def _rimcl():
     return [str(here)] if here.exists() else [sys.executable, "-m", "rimcl"]
 
 
-def _run(argv, log):
-    """Run one rimcl command; its wall and CPU seconds (children's user + system)."""
+#: ``run --reuse``: read the outputs a kept folder holds instead of running again (timings n/a)
+REUSE = False
+
+
+def _run(argv, log, out):
+    """Run one rimcl command into a fresh ``out``; its wall and CPU seconds (children's user
+    + system). With :data:`REUSE` and a finished ``out``: nothing run, (None, None)."""
+    if REUSE and (Path(out) / "stats.json").exists():
+        return None, None
+    shutil.rmtree(out, ignore_errors=True)  # a kept folder: never resume an older run
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
     with open(log, "w", encoding="utf-8") as out:
@@ -311,7 +332,7 @@ def _study(c, scale, work):
     argv = ["study", "--out", str(out), "--no-progress"]
     if scale == "small":
         argv += ["--tracers", "12", "--no-figures"]
-    wall, cpu = _run(argv, work / "study.log")
+    wall, cpu = _run(argv, work / "study.log", out)
     stats = _stats(out)
     where = "rimcl study --out study-out, stats.json"
     _budget(c, stats, "study", where, CASES)
@@ -340,7 +361,7 @@ def _tank(c, scale, work):
         tracers,
         "--no-progress",
     ]
-    wall, cpu = _run(argv, work / "tank.log")
+    wall, cpu = _run(argv, work / "tank.log", out)
     stats = _stats(out)
     where = "water-tank tutorial, stats.json"
     for case in ("dT=0.3", "dT=3", "dT=30"):
@@ -377,6 +398,7 @@ def _tank(c, scale, work):
     c.put(
         "time.tank.wall_s", wall, digits=2, unit="s", source="wall clock of the tutorial's command"
     )
+    _scene_table(c, stats, "water", where)
     summary = (out / "summary.md").read_text(encoding="utf-8")
     c.blocks["tank.answer"] = (
         _section(summary, "## Your answer")
@@ -388,6 +410,44 @@ def _tank(c, scale, work):
     csv = out / "stats.csv"
     if csv.exists():
         c.blocks["tank.csv"] = _fit_table(csv)
+    return {"wall_s": wall, "cpu_s": cpu, "argv": argv}
+
+
+def _scene_table(c, stats, prefix, where):
+    """A shipped scene's row per case: Δn_max, position-error peak, rms(ε_u3)/rms(u3) and the
+    budget's dominant part (the physical-scenes page)."""
+    for case in stats.get("cases", []):
+        name, base = case.get("name"), f"cases[{case.get('name')}]"
+        c.put_from(f"{prefix}.{name}.delta_n_max", stats, f"{base}.delta_n_max", where, sci=True)
+        c.put_from(
+            f"{prefix}.{name}.peak_over_L",
+            stats,
+            f"{base}.position_error_peak_over_L",
+            where,
+            sci=True,
+        )
+        c.put_from(f"{prefix}.{name}.peak_px", stats, f"{base}.position_error_peak_px", where)
+        c.put_from(
+            f"{prefix}.{name}.u3",
+            stats,
+            f"{base}.velocity.u3.rms_normalized",
+            where,
+            scale=100,
+            unit="%",
+        )
+        c.put_word(
+            f"{prefix}.{name}.dominant", dig(stats, f"{base}.budget_verdict.dominant"), where
+        )
+
+
+def _air(c, scale, work):
+    """The air scene of the physical-scenes page: ``rimcl study data_samples/scenes/air.toml
+    --tracers 30``."""
+    out = work / "air"
+    tracers = "30" if scale == "full" else "8"
+    argv = ["study", "data_samples/scenes/air.toml", "--out", str(out), "--tracers", tracers]
+    wall, cpu = _run([*argv, "--no-progress", "--no-figures"], work / "air.log", out)
+    _scene_table(c, _stats(out), "air", "air scene, stats.json")
     return {"wall_s": wall, "cpu_s": cpu, "argv": argv}
 
 
@@ -423,6 +483,7 @@ JOBS = {
     "lens": (_lens, "the default lens's closed forms (no run)"),
     "study": (_study, "rimcl study --out study-out (the default study)"),
     "tank": (_tank, "rimcl study data_samples/scenes/water_tank.toml --tracers 30"),
+    "air": (_air, "rimcl study data_samples/scenes/air.toml --tracers 30"),
 }
 
 
@@ -511,7 +572,11 @@ def run(scale, only=None, keep=None):
         )
         info["finished"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
         jobs[name] = info
-        print(f"[{name}] {info['wall_s']:.0f} s wall, {info['cpu_s']:.0f} s CPU", flush=True)
+        if info["wall_s"] is None:
+            info["reused"] = True
+            print(f"[{name}] reused the kept outputs", flush=True)
+        else:
+            print(f"[{name}] {info['wall_s']:.0f} s wall, {info['cpu_s']:.0f} s CPU", flush=True)
     numbers.update(collector.numbers)
     blocks = {**previous.get("blocks", {}), **collector.blocks}
     document = {
@@ -553,7 +618,11 @@ def render(text, document):
         body = blocks.get(key, match[3])
         return f"<!--block:{key}-->\n{match[2]}{body}{match[4]}"
 
-    return BLOCK_MARK.sub(block, NUMBER_MARK.sub(number, text))
+    def word(match):
+        key = match[2]
+        return (numbers[key]["text"] if key in numbers else match[1]) + f"<!--t:{key}-->"
+
+    return BLOCK_MARK.sub(block, WORD_MARK.sub(word, NUMBER_MARK.sub(number, text)))
 
 
 def differences(document):
@@ -568,14 +637,20 @@ def differences(document):
                 problems.append(f"{name}: unknown number key {match[2]}")
             elif entry["text"] != match[1].replace("−", "-"):
                 problems.append(f"{name}: {match[2]} is {match[1]}, the run gave {entry['text']}")
+        for match in WORD_MARK.finditer(text):
+            entry = document["numbers"].get(match[2])
+            if entry is None:
+                problems.append(f"{name}: unknown word key {match[2]}")
+            elif entry["text"] != match[1]:
+                problems.append(f"{name}: {match[2]} is {match[1]}, the run gave {entry['text']}")
         for match in BLOCK_MARK.finditer(text):
             body = document["blocks"].get(match[1])
             if body is None:
                 problems.append(f"{name}: unknown block key {match[1]}")
             elif body != match[3]:
                 problems.append(f"{name}: block {match[1]} differs from the run's output")
-        if "<!--n:" in NUMBER_MARK.sub("", text):
-            problems.append(f"{name}: a number mark without a number right before it")
+        if "<!--n:" in NUMBER_MARK.sub("", text) or "<!--t:" in WORD_MARK.sub("", text):
+            problems.append(f"{name}: a mark without a number or word right before it")
     return problems
 
 
@@ -610,10 +685,17 @@ def main(argv=None):
     )
     runner.add_argument("--only", help="comma-separated jobs: " + ", ".join(JOBS))
     runner.add_argument("--keep", help="keep the runs' outputs in this folder")
+    runner.add_argument(
+        "--reuse",
+        action="store_true",
+        help="with --keep: read the outputs already there instead of running (timings n/a)",
+    )
     sub.add_parser("apply", help="write the numbers of docs/_static/numbers.json into the pages")
     sub.add_parser("check", help="exit 1 where a page or the file is out of date")
     args = parser.parse_args(argv)
     if args.command == "run":
+        global REUSE
+        REUSE = bool(args.reuse and args.keep)
         run(
             "small" if args.small else "full",
             args.only.split(",") if args.only else None,
