@@ -89,7 +89,9 @@ def test_apply_rewrites_marked_numbers_and_blocks_only(tool):
 
 
 def test_dig_reads_cases_by_name_and_tolerates_missing_keys(tool):
-    stats = json.loads('{"cases": [{"name": "C0", "v": {"ci95": [1, 2]}}, {"name": "C4"}]}')
+    cases = '[{"name": "C0", "v": {"ci95": [1, 2]}}, {"name": "C4"}, {"name": "dT=0.3", "v": 3}]'
+    stats = json.loads(f'{{"cases": {cases}}}')
     assert tool.dig(stats, "cases[C0].v.ci95.1") == 2
+    assert tool.dig(stats, "cases[dT=0.3].v") == 3
     assert tool.dig(stats, "cases[C4].v.ci95.1") is None
     assert tool.dig(stats, "cases[C9].v") is None

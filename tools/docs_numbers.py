@@ -118,7 +118,7 @@ def fmt(value, digits=2, scale=1.0, decimals=None, sci=False):
 def dig(document, path):
     """The value at a dotted path; ``cases[C0]`` picks the case named C0. None if absent."""
     node = document
-    for part in path.split("."):
+    for part in re.split(r"\.(?![^\[]*\])", path):  # no split inside [dT=0.3]
         match = re.fullmatch(r"(\w+)\[(.+)\]", part)
         try:
             if match:
@@ -336,10 +336,11 @@ def _study(c, scale, work):
     stats = _stats(out)
     where = "rimcl study --out study-out, stats.json"
     _budget(c, stats, "study", where, CASES)
-    c.put("time.study.wall_s", wall, digits=2, unit="s", source="wall clock of the whole command")
-    c.put("time.study.cpu_s", cpu, digits=2, unit="s", source="CPU seconds of the command")
-    summary = (out / "summary.md").read_text(encoding="utf-8")
-    c.blocks["study.warnings"] = _section(summary, "## Warnings")
+    if wall is not None:  # a reused run keeps the timing of the run that made it
+        c.put(
+            "time.study.wall_s", wall, digits=2, unit="s", source="wall clock of the whole command"
+        )
+        c.put("time.study.cpu_s", cpu, digits=2, unit="s", source="CPU seconds of the command")
     return {
         "wall_s": wall,
         "cpu_s": cpu,
@@ -395,18 +396,18 @@ def _tank(c, scale, work):
         truth = dig(stats, f"{base}.velocity_fit.vector.rms_truth.mm_s")
         share = total / truth if total is not None and truth else None
         c.put(f"tank.{case}.u_fit.total_pct", share, digits=2, scale=100, unit="%", source=where)
-    c.put(
-        "time.tank.wall_s", wall, digits=2, unit="s", source="wall clock of the tutorial's command"
-    )
+    if wall is not None:  # a reused run keeps the timing of the run that made it
+        c.put(
+            "time.tank.wall_s",
+            wall,
+            digits=2,
+            unit="s",
+            source="wall clock of the tutorial's command",
+        )
     _scene_table(c, stats, "water", where)
     summary = (out / "summary.md").read_text(encoding="utf-8")
-    c.blocks["tank.answer"] = (
-        _section(summary, "## Your answer")
-        + "\n"
-        + _section(summary, "## Warnings")
-        + "\n"
-        + _section(summary, "## The lens")
-    )
+    # what the tutorial's `sed -n '/^## Your answer/,/^## Headline/p'` prints
+    c.blocks["tank.answer"] = _section(summary, "## Your answer", "## Headline")
     csv = out / "stats.csv"
     if csv.exists():
         c.blocks["tank.csv"] = _fit_table(csv)
@@ -487,14 +488,15 @@ def _locking(c, scale, work):
     return {"wall_s": wall, "cpu_s": cpu}
 
 
-def _section(text, heading):
-    """A ``## heading`` section of a summary.md, up to the next ``## `` (the heading kept)."""
+def _section(text, first, last):
+    """The lines of a summary.md from the heading ``first`` up to the heading that starts with
+    ``last`` (not included); a note where ``first`` is missing."""
     lines = text.splitlines()
     try:
-        start = next(i for i, line in enumerate(lines) if line.strip() == heading)
+        start = next(i for i, line in enumerate(lines) if line.strip() == first)
     except StopIteration:
-        return f"{heading}\n\n(none)\n"
-    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
+        return f"(summary.md has no section {first!r})\n"
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith(last)), len(lines))
     return "\n".join(lines[start:end]).rstrip() + "\n"
 
 
@@ -611,12 +613,14 @@ def run(scale, only=None, keep=None, target=NUMBERS):
             scale=scale, load_before=round(load, 1), load_after=round(os.getloadavg()[0], 1)
         )
         info["finished"] = datetime.now(timezone.utc).isoformat(timespec="seconds")
-        jobs[name] = info
         if info["wall_s"] is None:
-            info["reused"] = True
+            # the timing (if recorded) of the run that made the outputs
+            before = previous.get("jobs", {}).get(name, {})
+            info.update(reused=True, wall_s=before.get("wall_s"), cpu_s=before.get("cpu_s"))
             print(f"[{name}] reused the kept outputs", flush=True)
         else:
             print(f"[{name}] {info['wall_s']:.0f} s wall, {info['cpu_s']:.0f} s CPU", flush=True)
+        jobs[name] = info
     numbers.update(collector.numbers)
     blocks = {**previous.get("blocks", {}), **collector.blocks}
     document = {
