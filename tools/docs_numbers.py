@@ -698,8 +698,8 @@ def differences(document):
     return problems
 
 
-def apply():
-    document = load_numbers()
+def apply(path=NUMBERS):
+    document = load_numbers(path)
     for page in pages():
         text = page.read_text(encoding="utf-8")
         new = render(text, document)
@@ -708,8 +708,8 @@ def apply():
             print(f"updated {page.relative_to(ROOT)}")
 
 
-def check():
-    document = load_numbers()
+def check(path=NUMBERS):
+    document = load_numbers(path)
     problems = differences(document)
     if document["config_hash"] != config_hash():
         problems.append(
@@ -737,8 +737,10 @@ def main(argv=None):
         action="store_true",
         help="with --keep: read the outputs already there instead of running (timings n/a)",
     )
-    sub.add_parser("apply", help="write the numbers of docs/_static/numbers.json into the pages")
-    sub.add_parser("check", help="exit 1 where a page or the file is out of date")
+    applier = sub.add_parser("apply", help="write the numbers of the file into the pages")
+    checker = sub.add_parser("check", help="exit 1 where a page or the file is out of date")
+    for command in (applier, checker):
+        command.add_argument("--numbers", default=str(NUMBERS), help="default: %(default)s")
     args = parser.parse_args(argv)
     if args.command == "run":
         global REUSE
@@ -751,9 +753,9 @@ def main(argv=None):
         )
         return 0
     if args.command == "apply":
-        apply()
+        apply(args.numbers)
         return 0
-    return check()
+    return check(args.numbers)
 
 
 if __name__ == "__main__":
