@@ -91,7 +91,7 @@ def fmt(value, digits=2, scale=1.0, decimals=None, sci=False):
     Returns
     -------
     str
-        Plain decimals from 1e-3 to 1e5 (``0.013``, ``370``), else ``3.8e-7``.
+        Plain decimals from 1e-4 to 1e5 (``0.00073``, ``370``), else ``3.8e-7``.
     """
     if value is None or not math.isfinite(float(value)):
         return "n/a"
@@ -101,7 +101,7 @@ def fmt(value, digits=2, scale=1.0, decimals=None, sci=False):
     if v == 0:
         return "0"
     exponent = math.floor(math.log10(abs(v)))
-    if sci or exponent < -3 or exponent >= 5:
+    if sci or exponent < -4 or exponent >= 5:
         mantissa = f"{v / 10**exponent:.{digits - 1}f}"
         if float(mantissa) >= 10:  # 9.96 → 10 at 2 digits: one more power
             exponent += 1
