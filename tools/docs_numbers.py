@@ -228,39 +228,16 @@ def _budget(c, stats, prefix, where, cases):
         c.put_from(f"{prefix}.{case}.used", stats, f"{base}.n_used", where, decimals=0)
         c.put_from(f"{prefix}.{case}.tracers", stats, f"{base}.n_tracers", where, decimals=0)
         for flag in ("below_threshold", "split", "no_rays"):
-            c.put_from(
-                f"{prefix}.{case}.excluded.{flag}",
-                stats,
-                f"{base}.n_excluded.{flag}",
-                where,
-                decimals=0,
-            )
-        c.put_from(
+            key, path = f"{prefix}.{case}.excluded.{flag}", f"{base}.n_excluded.{flag}"
+            c.put_from(key, stats, path, where, decimals=0)
+        key, path = (
             f"{prefix}.{case}.position_median_over_L",
-            stats,
             f"{base}.position_error_median_over_L",
-            where,
-            digits=3,
-            sci=True,
         )
-        c.put_from(
-            f"{prefix}.{case}.u3_fit.baseline",
-            stats,
-            f"{base}.baseline.velocity_fit.u3.rms_normalized",
-            where,
-            digits=2,
-            scale=100,
-            unit="%",
-        )
-        c.put_from(
-            f"{prefix}.{case}.a3_fit.baseline",
-            stats,
-            f"{base}.baseline.acceleration_fit.a3.rms_normalized",
-            where,
-            digits=2,
-            scale=100,
-            unit="%",
-        )
+        c.put_from(key, stats, path, where, digits=3, sci=True)
+        for name, group in (("u3_fit", "velocity_fit.u3"), ("a3_fit", "acceleration_fit.a3")):
+            path = f"{base}.baseline.{group}.rms_normalized"
+            c.put_from(f"{prefix}.{case}.{name}.baseline", stats, path, where, scale=100, unit="%")
     # the growth of the optics part from case to case (G grows ×8.4, ×11.8)
     for a, b in itertools.pairwise(cases):
         x = dig(stats, f"cases[{a}].optics.velocity.u3.rms_normalized")
