@@ -178,20 +178,24 @@ def _rimcl():
 REUSE = False
 
 
-def _run(argv, log, out):
-    """Run one rimcl command into a fresh ``out``; its wall and CPU seconds (children's user
-    + system). With :data:`REUSE` and a finished ``out``: nothing run, (None, None)."""
-    if REUSE and (Path(out) / "stats.json").exists():
+def _run(argv, log, out, ok=(0,)):
+    """Run one rimcl command into a fresh ``out`` (a folder, or the file its stdout goes to);
+    its wall and CPU seconds (children's user + system). With :data:`REUSE` and a finished
+    ``out``: nothing run, (None, None)."""
+    out = Path(out)
+    if REUSE and ((out / "stats.json").exists() or out.is_file()):
         return None, None
     shutil.rmtree(out, ignore_errors=True)  # a kept folder: never resume an older run
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    with open(log, "w", encoding="utf-8") as out:
-        done = subprocess.run(_rimcl() + argv, stdout=out, stderr=subprocess.STDOUT, cwd=ROOT)
+    with open(log, "w", encoding="utf-8") as messages:
+        stdout = open(out, "w", encoding="utf-8") if out.suffix == ".json" else messages
+        with stdout:
+            done = subprocess.run(_rimcl() + argv, stdout=stdout, stderr=messages, cwd=ROOT)
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    if done.returncode != 0:
+    if done.returncode not in ok:
         tail = Path(log).read_text(encoding="utf-8")[-2000:]
         raise RuntimeError(f"rimcl {' '.join(argv)} failed ({done.returncode}):\n{tail}")
     return wall, cpu
@@ -345,31 +349,12 @@ def _tank(c, scale, work):
     where = "water-tank tutorial, stats.json"
     for case in ("dT=0.3", "dT=3", "dT=30"):
         base = f"cases[{case}].units"
-        c.put_from(
-            f"tank.{case}.position_um",
-            stats,
-            f"{base}.position.median.um",
-            where,
-            digits=3,
-            unit="µm",
-        )
-        c.put_from(
-            f"tank.{case}.position_px",
-            stats,
-            f"{base}.position.median.px",
-            where,
-            digits=3,
-            unit="px",
-        )
+        for unit, digits in (("um", 3), ("px", 3)):
+            path = f"{base}.position.median.{unit}"
+            c.put_from(f"tank.{case}.position_{unit}", stats, path, where, digits=digits)
         for part in ("rms_total", "rms_refraction", "rms_baseline", "rms_truth"):
-            c.put_from(
-                f"tank.{case}.u_fit.{part}",
-                stats,
-                f"{base}.velocity_fit.vector.{part}.mm_s",
-                where,
-                digits=3,
-                unit="mm/s",
-            )
+            path = f"{base}.velocity_fit.vector.{part}.mm_s"
+            c.put_from(f"tank.{case}.u_fit.{part}", stats, path, where, digits=3, unit="mm/s")
         total = dig(stats, f"{base}.velocity_fit.vector.rms_total.mm_s")
         truth = dig(stats, f"{base}.velocity_fit.vector.rms_truth.mm_s")
         share = total / truth if total is not None and truth else None
@@ -474,6 +459,25 @@ def _fan(c, scale, work):
     return {"wall_s": wall, "cpu_s": cpu, "argv": argv}
 
 
+def _verify(c, scale, work):
+    """``rimcl verify --json``: the integrator against closed forms (the accuracy page)."""
+    out = work / "verify.json"
+    # status 1: a case missed its tolerance, still a result to quote
+    wall, cpu = _run(["verify", "--json"], work / "verify.log", out, ok=(0, 1))
+    result = json.loads(out.read_text(encoding="utf-8"))
+    where = "rimcl verify --json"
+    for row in result.get("rows", []):
+        case = row["case"].replace(" ", "_")
+        interp = "analytic" if row["interpolation"] == "analytic" else "grid"
+        key = f"verify.{case}.{interp}.{row['precision']}"
+        c.put(key, row.get("max_error"), source=f"{where}: {row['case']}, {row['interpolation']}")
+    ratios = dig(result, "convergence.ratios") or []
+    for index, ratio in enumerate(ratios):
+        c.put(f"verify.convergence.{index}", ratio, digits=3, source=f"{where}: convergence")
+    c.put("verify.f32_drift", dig(result, "f32_drift.f32"), source=f"{where}: f32_drift")
+    return {"wall_s": wall, "cpu_s": cpu, "passed": result.get("passed")}
+
+
 def _locking(c, scale, work):
     """Why the default lens is f/11: the noiseless baseline of the sliding fit's a3 at C0
     through f/8 (1.94 px images) and f/11 (2.65 px), 100 tracers each."""
@@ -544,6 +548,7 @@ JOBS = {
     "study": (_study, "rimcl study --out study-out (the default study)"),
     "tank": (_tank, "rimcl study data_samples/scenes/water_tank.toml --tracers 30"),
     "air": (_air, "rimcl study data_samples/scenes/air.toml --tracers 30"),
+    "verify": (_verify, "rimcl verify --json"),
     "fan": (_fan, "the noiseless fan of earlier versions (24² rays), 400 tracers"),
     "locking": (_locking, "C0 on a noiseless camera through f/8 and f/11, 100 tracers each"),
 }
