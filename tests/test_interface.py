@@ -26,6 +26,7 @@ def _lens(window, fluid_index, depth=2 * np.pi):
         scene,
         LENGTH_M,
         magnification=0.2,
+        f_number=8.0,
         pixels=(1024, 1024),
         fluid_index=fluid_index,
         window=window,

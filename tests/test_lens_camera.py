@@ -15,7 +15,7 @@ def _scene():
 
 
 def _camera(**kw):
-    settings = {"length_m": LENGTH_M, "magnification": 0.2, "rays": 256, **kw}
+    settings = {"length_m": LENGTH_M, "magnification": 0.2, "f_number": 8.0, "rays": 256, **kw}
     return LensCamera(_scene(), **settings)
 
 

@@ -225,17 +225,31 @@ def test_summary_leads_with_the_answer_in_physical_units(study):
 
 
 def test_without_scales_outputs_say_field_units(device, tmp_path):
+    """A field file without length_m and time_s: the shipped sample's copy, its scales removed."""
+    import shutil
+
+    import h5py
+
+    from rimcl.fields.sample import sample_path
+
+    bare = tmp_path / "bare.h5"
+    shutil.copyfile(sample_path(), bare)
+    with h5py.File(bare, "a") as h5:
+        for key in ("length_m", "time_s"):
+            h5.attrs.pop(key, None)
     scene = load_scene(
-        None, {**TINY, "run.mode": "ptv", "field.length_m": None, "field.time_s": None,
-               "run.device": device.name},
+        None, {**TINY, "run.mode": "ptv", "field.path": str(bare), "field.length_m": None,
+               "field.time_s": None, "run.device": device.name},
     )  # fmt: skip
-    run_study(scene, tmp_path, figures=False)
-    stats = json.loads((tmp_path / "stats.json").read_text())
+    assert scene["field"]["time_s"] is None
+    out = tmp_path / "study"
+    run_study(scene, out, figures=False)
+    stats = json.loads((out / "stats.json").read_text())
     units = stats["cases"][0]["units"]
     assert (
         units["scales"]["in_field_units"] and units["velocity"]["u3"]["rms_truth"]["mm_s"] is None
     )
-    assert "*In field units*" in (tmp_path / "summary.md").read_text()
+    assert "*In field units*" in (out / "summary.md").read_text()
 
 
 def test_case_and_piv_files_open_with_xarray_as_named_dimensions_with_units(study):

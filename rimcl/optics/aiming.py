@@ -3,7 +3,7 @@
 A lens collects the light a tracer sends into its pupil. :meth:`LensCamera.directions` aims
 each tracer's rays at points spread over the pupil as if the fluid were uniform. Where the
 index varies, the field bends them; once it bends them by more than the pupil's half angle
-seen from the tracer (about 0.008 rad in water for the default f/8 lens at 300 mm), every
+seen from the tracer (about 0.006 rad in water for the default f/11 lens at 300 mm), every
 aimed ray misses the pupil and the tracer is lost (``no_rays``), or most of them and its
 image dims below the threshold, although a real lens still collects the light the tracer
 sends in the directions that the field bends onto the pupil.

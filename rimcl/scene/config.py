@@ -17,7 +17,14 @@ from rimcl.imaging.frames import Imaging
 from rimcl.imaging.mie import MieWeights
 from rimcl.imaging.render import Renderer
 from rimcl.imaging.sensor import Sensor
-from rimcl.optics.camera import CAMERAS, FlatWindow, LensCamera, PlaneCamera, PupilCamera
+from rimcl.optics.camera import (
+    CAMERAS,
+    DEFAULT_F_NUMBER,
+    FlatWindow,
+    LensCamera,
+    PlaneCamera,
+    PupilCamera,
+)
 
 DEFAULT_RAYS_PER_BATCH = 1 << 17  # rays traced per batch: ~40 MB of host memory
 DEFAULT_RAY_SAMPLE = 20_000
@@ -126,7 +133,7 @@ class CameraConfig:
             scene,
             float(self.length_m),
             focal_length_mm=float(self.focal_length_mm),
-            f_number=8.0 if self.f_number is None else float(self.f_number),
+            f_number=DEFAULT_F_NUMBER if self.f_number is None else float(self.f_number),
             # M = 0.2 unless the working distance sets it: the default camera's
             magnification=self.magnification
             if self.magnification is not None or self.working_distance_mm is not None

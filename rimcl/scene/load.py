@@ -84,7 +84,7 @@ PRESETS = {
     # (the paper traced a 512³ eighth of the 1024³ box). Each ray weighs the Mie intensity
     # of its initial direction (its §3.2: 10 µm tracers, 532 nm; polystyrene and unpolarised
     # light assumed), in the case's mean index; a noiseless 10-bit camera. The fan is a lens
-    # of NA ≈ 0.8, which averages opposite shifts: the default lens (NA 0.010) sees more.
+    # of NA ≈ 0.8, which averages opposite shifts: the default lens (NA 0.0076) sees more.
     "paper": {
         "field": {"box": [[0.0, math.pi], [0.0, math.pi], [0.0, math.pi]]},
         "cases": {"thresholds": {"C0": 100.0, "C1": 100.0, "C2": 100.0, "C3": 500.0, "C4": 500.0}},
@@ -210,11 +210,20 @@ def _dotted(raw, source):
 
 def field_scales(scene, where):
     """Fill ``field.length_m`` and ``field.time_s`` from ``field.velocity_m_s`` and from
-    what the field file records (``rimcl field import`` writes both where its input says)."""
+    what the field file records (``rimcl field import`` writes both where its input says).
+
+    Without ``field.path`` (the shipped sample) only the sample's ``time_s`` is taken: its
+    ``length_m`` is the default lens camera's, while an LPT rig scales the field to its own
+    size (:data:`rimcl.fields.sample.SAMPLE_LENGTH_M`)."""
     field = scene["field"]
     recorded = {}
     if field["length_m"] is None or field["time_s"] is None:
-        recorded = _recorded_scales(field["path"])
+        if field["path"]:
+            recorded = _recorded_scales(field["path"])
+        else:
+            from rimcl.fields.sample import sample_path
+
+            recorded = {"time_s": _recorded_scales(sample_path()).get("time_s")}
     if field["length_m"] is None:
         field["length_m"] = recorded.get("length_m")
     if field["velocity_m_s"] is not None:

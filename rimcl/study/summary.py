@@ -14,6 +14,7 @@ import math
 from datetime import datetime, timezone
 
 from rimcl import __version__
+from rimcl.optics.camera import DEFAULT_F_NUMBER
 from rimcl.piv.comparison import COMPARED
 from rimcl.stats.sensitivity import FILE_VARIANTS, MEASURED_VARIANTS, THRESHOLD_NAMES
 from rimcl.stats.summaries import (
@@ -461,7 +462,7 @@ def summary_markdown(stats, study):
         else f"{camera.kind} camera, {camera.pupil_rays} rays per tracer"
     )
     if camera.kind == "lens":
-        f_number = 8.0 if camera.f_number is None else camera.f_number
+        f_number = DEFAULT_F_NUMBER if camera.f_number is None else camera.f_number
         wall = camera.window_thickness_mm
         rays = (
             f"lens camera ({camera.focal_length_mm:g} mm f/{f_number:g}"
