@@ -57,6 +57,7 @@ from rimcl.core.tables_h5 import (
     si_per_unit,
     write_variable,
 )
+from rimcl.lpt.openlpt_track import MANIFEST
 from rimcl.stats.render_file import THRESHOLD_SUFFIXES
 from rimcl.stats.tables import write_json
 
@@ -201,27 +202,44 @@ def frame_writer(out_dir, scene, overwrite=True):
     return write
 
 
+def _visible(pixels, cameras):
+    """Target points every camera sees on its sensor: bool (M,)."""
+    seen = np.ones(pixels.shape[1], dtype=bool)
+    for c, camera in enumerate(cameras):
+        columns, rows = pixels[c, :, 0], pixels[c, :, 1]
+        seen &= (columns >= -0.5) & (columns <= camera.pixels[0] - 0.5)
+        seen &= (rows >= -0.5) & (rows <= camera.pixels[1] - 0.5)
+    return seen
+
+
 def write_dataset(out_dir, run, result, scene, overwrite=True):
     """Files for LPT codes (layout in the module docstring). Returns the directory."""
+    from rimcl.lpt.openlpt_files import write_camera_files
+
     folder = out_dir / "dataset" / result["case"]
     folder.mkdir(parents=True, exist_ok=True)
-    target_mm = _to_mm(result["target"], run.length_m)
-    pixels = result["target_pixels"]
-    columns = [target_mm] + [pixels[c] for c in range(len(pixels))]
+    cameras = result["cameras"]
+    pixels = np.asarray(result["target_pixels"])
+    seen = _visible(pixels, cameras)
+    target_mm = _to_mm(result["target"], run.length_m)[seen]
+    columns = [target_mm] + [pixels[c][seen] for c in range(len(pixels))]
     header = "X Y Z " + " ".join(f"x{c + 1} y{c + 1}" for c in range(len(pixels)))
+    names = ", ".join(f"x{c + 1} y{c + 1} = {camera.name}" for c, camera in enumerate(cameras))
     with atomic_path(folder / "calibration_points.txt", overwrite) as tmp:
         np.savetxt(
             tmp,
             np.hstack(columns),
             fmt="%.6f",
-            header=f"{header}\nX, Y, Z in mm (x2, x3, x1 of the field); x, y in px",
+            header=f"{header}\nX, Y, Z in mm from the field origin (X, Y, Z = field x2, x3, "
+            f"x1); x = column, y = row in px, pixel (0, 0) centred at (0, 0); {names}; "
+            f"{int(seen.sum())} of {seen.size} target points (those every camera sees)",
         )
     to_field = np.zeros((4, 4))
     scale = 1e-3 / run.length_m
     for xyz, axis in enumerate(XYZ_AXES):
         to_field[axis, xyz] = scale
     to_field[3, 3] = 1.0
-    for c, camera in enumerate(result["cameras"]):
+    for c, camera in enumerate(cameras):
         pinhole = result["calibration"][c]["pinhole"]
         matrix_mm = np.asarray(pinhole["matrix"]) @ to_field
         write_json(
@@ -234,8 +252,63 @@ def write_dataset(out_dir, run, result, scene, overwrite=True):
             },
             overwrite,
         )
+    openlpt = write_camera_files(
+        folder, cameras, result["calibration"], result["target"], overwrite
+    )
     write_truth_tracks(folder, run, overwrite)
+    write_json(folder / MANIFEST, _manifest(run, result, openlpt), overwrite)
     return folder
+
+
+def _manifest(run, result, openlpt):
+    """What :mod:`rimcl.lpt.openlpt_track` needs to run a tracker on the dataset."""
+    true_mm = _to_mm(run.true, run.length_m)
+    steps = np.linalg.norm(np.diff(true_mm, axis=0), axis=-1)
+    pixel_mm = [camera.pixel_size * run.length_m * 1e3 for camera in result["cameras"]]
+    # the view volume: where the tracers are in any frame, and a few pixels around
+    lo = np.nanmin(true_mm.reshape(-1, 3), axis=0)
+    hi = np.nanmax(true_mm.reshape(-1, 3), axis=0)
+    margin = 5.0 * max(pixel_mm)
+    frames = list(range(run.true.shape[0]))
+    dt = float(run.times[1] - run.times[0]) if len(frames) > 1 else None
+    cameras = []
+    for c, camera in enumerate(result["cameras"]):
+        files = openlpt[camera.name]
+        cameras.append(
+            {
+                "name": camera.name,
+                "images": [f"{camera.name}_frame{f:04d}.tif" for f in frames],
+                "openlpt_file": files.get("PINPLATE")
+                or files.get("PINHOLE")
+                or files["POLYNOMIAL"],
+                "openlpt_files": files,
+                "full_scale": int(result["sensor"]["full_scale"]),
+                "threshold_counts": float(result["exposure"]["thresholds"][c]),
+                "psf_sigma_px": float(camera.psf_sigma_px),
+                "pixel_mm": float(pixel_mm[c]),
+                "calibration_residual_px": {
+                    model: result["calibration"][c][model]["residual_px"]
+                    for model in ("pinhole", "soloff")
+                },
+            }
+        )
+    return {
+        "rimcl_schema": "lpt_dataset",
+        "case": result["case"],
+        "frames": frames,
+        "tracers": int(run.true.shape[1]),
+        "in_view": (np.asarray(result["flags"]) == 0).tolist(),
+        "dt": dt,
+        "dt_s": None if run.time_s is None or dt is None else dt * run.time_s,
+        "length_m": run.length_m,
+        "axes": "X, Y, Z = field x2, x3, x1 (mm from the field origin)",
+        "volume_mm": [
+            float(v) for pair in zip(lo - margin, hi + margin, strict=True) for v in pair
+        ],
+        "voxel_mm": float(np.mean(pixel_mm)),
+        "max_displacement_mm": float(np.nanmax(steps)) if steps.size else 0.0,
+        "cameras": cameras,
+    }
 
 
 def write_truth_tracks(folder, run, overwrite=True):
