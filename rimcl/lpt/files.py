@@ -30,9 +30,15 @@ with named dimensions (HDF5 dimension scales) and a ``units`` attribute on every
   frame through the field and through the uniform fluid: the frames the centroids were
   located in (:func:`frame_writer`; every tracer's digitised window added, clipped);
 - ``calibration_points.txt``: the first LPT challenge's layout, one target point a row,
-  ``X Y Z x1 y1 … xC yC`` (mm, px), with ``X, Y, Z = x2, x3, x1`` from the field's origin;
+  ``X Y Z x1 y1 … xC yC`` (mm, px), with ``X, Y, Z = x2, x3, x1`` from the field's origin,
+  only the points every camera sees on its sensor (the header names the cameras);
 - ``cam<k>_pinhole.json``: the fitted DLT matrix (maps ``[X, Y, Z, 1]`` in mm to pixels),
   its residual, and the true camera parameters;
+- OpenLPT camera files (:mod:`rimcl.lpt.openlpt_files`): ``<cam>_openlpt_pinplate.txt``
+  (or ``_pinhole.txt`` where nothing refracts) and ``<cam>_openlpt_polynomial.txt``;
+- ``openlpt_dataset.json``: the manifest of :mod:`rimcl.lpt.openlpt_track` (frames, frame
+  spacing, view volume and voxel in mm, per camera its frames, camera files, full scale,
+  threshold, PSF σ, object-space pixel, calibration residuals; ``in_view``);
 - ``truth_tracks.csv``: ``track_id, frame, time, X_mm, Y_mm, Z_mm, u, v, w, ax, ay, az``
   (time in field time units; with ``time_s`` velocity in m/s and acceleration in m/s²,
   without it in m per field time unit and m per field time unit squared; the header says
