@@ -27,8 +27,9 @@ with named dimensions (HDF5 dimension scales) and a ``units`` attribute on every
 **Dataset** (``rimcl lpt render``), in ``<out>/dataset/<case>/``:
 
 - ``images/field/cam<k>_frame<ffff>.tif`` and ``images/uniform/…``: TIFF per camera and
-  frame through the field and through the uniform fluid: the frames the centroids were
-  located in (:func:`frame_writer`; every tracer's digitised window added, clipped);
+  frame through the field and through the uniform fluid: what the sensor records
+  (:func:`rimcl.lpt.frames.recorded_frame`: every tracer's light added, background and
+  noise on every pixel, digitised once);
 - ``calibration_points.txt``: the first LPT challenge's layout, one target point a row,
   ``X Y Z x1 y1 … xC yC`` (mm, px), with ``X, Y, Z = x2, x3, x1`` from the field's origin,
   only the points every camera sees on its sensor (the header names the cameras);

@@ -38,12 +38,12 @@ from rimcl.lpt.calibration import PinholeModel, SoloffModel, target_points, tria
 from rimcl.lpt.config import CameraSpec, preset_cameras
 from rimcl.lpt.config import describe as describe_scene
 from rimcl.lpt.flow import BUILTIN_DT, Volume, builtin_flow, volume_velocity
+from rimcl.lpt.frames import recorded_frame
 from rimcl.lpt.images import (
     PASSES,
     camera_imaging,
     device_imager,
     locate_view,
-    new_canvas,
     noiseless,
     ray_light,
     rig_exposure,
@@ -246,7 +246,7 @@ def _choose_rays(field, cameras, imagings, exposure, sensor, mie, points, tracer
             key = (PASSES["meas"], 0, c)
             imager = device_imager(quiet, light.shape[1], len(light), device)
             return locate_view(
-                quiet, seen, light, exposure.counts_per_light, key, None, imager
+                quiet, seen, light, exposure.counts_per_light, key, imager=imager
             ).centroid
 
         choices.append(
@@ -341,15 +341,10 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
                 started = time.perf_counter()
                 seen = view(medium, camera, run.true[k], choices[c]["rays"], tracer)
                 middle = time.perf_counter()
-                canvas = new_canvas(camera, sensor) if frame_sink else None
+                light = ray_light(seen, mie)
+                key = (PASSES[kind], k, c)
                 found = locate_view(
-                    imagings[c],
-                    seen,
-                    ray_light(seen, mie),
-                    exposure.scale,
-                    (PASSES[kind], k, c),
-                    canvas,
-                    imagers[c],
+                    imagings[c], seen, light, exposure.scale, key, imager=imagers[c]
                 )
                 timings["views"] += middle - started
                 timings["images"] += time.perf_counter() - middle
@@ -362,7 +357,10 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
                 for suffix, (points, bits) in found.variants.items():
                     variants[kind, suffix][0][k, c], variants[kind, suffix][1][k, c] = points, bits
                 if frame_sink:
-                    frame_sink(str(index.name), kind, camera, k, canvas.counts)
+                    frame = recorded_frame(
+                        imagings[c], seen, light, exposure.scale, key, camera.pixels
+                    )
+                    frame_sink(str(index.name), kind, camera, k, frame)
         if progress:
             progress(case, k + 1, frames)
     started = time.perf_counter()
