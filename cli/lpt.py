@@ -114,3 +114,40 @@ def render_command(scene, output, device_spec, overwrite, **options):
     frame (through the field and the uniform fluid), calibration points, pinhole
     parameters and truth tracks. Options as rimcl lpt run."""
     _run(scene, output, device_spec, overwrite, True, options)
+
+
+@lpt.command("track")
+@click.argument("dataset", type=click.Path(file_okay=False, exists=True))
+@click.option(
+    "--with",
+    "tracker",
+    type=click.Choice(["openlpt"]),
+    default="openlpt",
+    show_default=True,
+    help="The LPT code to run (OpenLPT's Shake-the-Box: pip install 'rimcl[openlpt]').",
+)
+@click.option(
+    "--frames",
+    "kinds",
+    type=click.Choice(["both", "uniform", "field"]),
+    default="both",
+    show_default=True,
+    help="Which frames to track: through the uniform fluid, through the field, or both "
+    "(both gives the refraction error the tracker sees).",
+)
+@click.option(
+    "--timeout", default=3600.0, show_default=True, help="Longest tracker run (s) per kind."
+)
+@handle_errors
+def track_command(dataset, tracker, kinds, timeout):
+    """Track a dataset of 'rimcl lpt render' (OUT/dataset/<case>) with an LPT code and
+    compare its tracks with the truth: tracks found, ghosts, position, velocity and
+    acceleration errors (written to DATASET/openlpt/track_stats.json)."""
+    from rimcl.lpt.openlpt_track import summary_lines, track_dataset
+
+    chosen = ("uniform", "field") if kinds == "both" else (kinds,)
+    stats = track_dataset(
+        dataset, chosen, timeout_s=timeout, progress=lambda line: click.echo(line, err=True)
+    )
+    for line in summary_lines(stats):
+        click.echo(line)

@@ -12,10 +12,10 @@ from rimcl.fields.field import Field
 from rimcl.imaging.frames import THRESHOLD_VARIANTS
 from rimcl.imaging.mie import MieWeights
 from rimcl.imaging.sensor import Sensor
+from rimcl.lpt.frames import recorded_frame
 from rimcl.lpt.images import (
     camera_imaging,
     locate_view,
-    new_canvas,
     ray_light,
     rig_exposure,
 )
@@ -48,8 +48,10 @@ def test_located_centroid_and_frame_equal_the_closed_form():
     seen = [view(field, c, points, 1, Tracer()) for c in cameras]
     exposure = rig_exposure(cameras, seen, None, sensor, 0.5, 0.05)
     imaging = camera_imaging(camera, 1, exposure, sensor)
-    canvas = new_canvas(camera, sensor)
-    found = locate_view(imaging, seen[1], ray_light(seen[1]), exposure.scale, (1, 0, 1), canvas)
+    light = ray_light(seen[1])
+    found = locate_view(imaging, seen[1], light, exposure.scale, (1, 0, 1))
+    whole = recorded_frame(imaging, seen[1], light, exposure.scale, (1, 0, 1), camera.pixels)
+    assert whole.shape == (camera.pixels[1], camera.pixels[0]) and whole.dtype == np.uint16
     sigma = camera.psf_sigma_px
     threshold = exposure.thresholds[1]
     # the median tracer (all tracers alike, Mie off) peaks at half full scale when centred
@@ -71,10 +73,42 @@ def test_located_centroid_and_frame_equal_the_closed_form():
         np.testing.assert_allclose(located, expected, rtol=0, atol=1e-9)
         # pixel locking of the small (σ ≈ 0.6 px) image: the located point is off the ray's
         np.testing.assert_array_less(np.abs(located - point), 0.25)
-        frame = canvas.counts[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
+        frame = whole[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
         np.testing.assert_array_equal(frame, counts.astype(np.uint16))
     np.testing.assert_allclose(found.optics, seen[1].images[:, 0], rtol=0, atol=1e-12)
     assert np.all(found.flags == 0)
+
+
+def test_recorded_frame_has_noise_everywhere_and_overlaps_add():
+    """The frame a noisy sensor records: background and noise on every pixel (mean and
+    spread of the empty pixels as the sensor's model gives them), and two tracers at one
+    point make an image of twice the light of one."""
+    cameras = _cameras()
+    camera = cameras[1]
+    field = _uniform()
+    centre = _centre()
+    noisy = Sensor(bit_depth=16, noise=True, read_noise_e=5.0, background_e=400.0)
+    seen = [view(field, c, centre[None], 1, Tracer()) for c in cameras]
+    exposure = rig_exposure(cameras, seen, None, noisy, 0.5, 0.05)
+    imaging = camera_imaging(camera, 1, exposure, noisy)
+    one = view(field, camera, centre[None], 1, Tracer())
+    frame = recorded_frame(imaging, one, ray_light(one), exposure.scale, (0, 0, 1), camera.pixels)
+    point = one.images[0, 0]
+    rows, cols = np.mgrid[: frame.shape[0], : frame.shape[1]]
+    empty = np.hypot(cols - point[0], rows - point[1]) > 10
+    background = frame[empty].astype(float)
+    gain = noisy.gain
+    # Poisson(400 e-) + 5 e- read noise, in counts of `gain` electrons
+    assert background.mean() == pytest.approx(400.0 / gain, rel=0.02)
+    assert background.std() == pytest.approx(np.sqrt(400.0 + 25.0) / gain, rel=0.05)
+    assert np.all(background > 0)
+    # overlapping images add as light does (noiseless sensor: exact up to rounding)
+    quiet = camera_imaging(camera, 1, exposure, Sensor(bit_depth=16))
+    two = view(field, camera, np.stack([centre, centre]), 1, Tracer())
+    single = recorded_frame(quiet, one, ray_light(one), exposure.scale, (0, 0, 1), camera.pixels)
+    double = recorded_frame(quiet, two, ray_light(two), exposure.scale, (0, 0, 1), camera.pixels)
+    assert double.max() > 1.9 * single.max()
+    np.testing.assert_allclose(double.astype(float), 2.0 * single, atol=1.0)
 
 
 def test_mie_weight_per_camera_is_its_scattering_angle():

@@ -28,12 +28,19 @@ with named dimensions (HDF5 dimension scales) and a ``units`` attribute on every
 **Dataset** (``rimcl lpt render``), in ``<out>/dataset/<case>/``:
 
 - ``images/field/cam<k>_frame<ffff>.tif`` and ``images/uniform/…``: TIFF per camera and
-  frame through the field and through the uniform fluid: the frames the centroids were
-  located in (:func:`frame_writer`; every tracer's digitised window added, clipped);
+  frame through the field and through the uniform fluid: what the sensor records
+  (:func:`rimcl.lpt.frames.recorded_frame`: every tracer's light added, background and
+  noise on every pixel, digitised once);
 - ``calibration_points.txt``: the first LPT challenge's layout, one target point a row,
-  ``X Y Z x1 y1 … xC yC`` (mm, px), with ``X, Y, Z = x2, x3, x1`` from the field's origin;
+  ``X Y Z x1 y1 … xC yC`` (mm, px), with ``X, Y, Z = x2, x3, x1`` from the field's origin,
+  only the points every camera sees on its sensor (the header names the cameras);
 - ``cam<k>_pinhole.json``: the fitted DLT matrix (maps ``[X, Y, Z, 1]`` in mm to pixels),
   its residual, and the true camera parameters;
+- OpenLPT camera files (:mod:`rimcl.lpt.openlpt_files`): ``<cam>_openlpt_pinplate.txt``
+  (or ``_pinhole.txt`` where nothing refracts) and ``<cam>_openlpt_polynomial.txt``;
+- ``openlpt_dataset.json``: the manifest of :mod:`rimcl.lpt.openlpt_track` (frames, frame
+  spacing, view volume and voxel in mm, per camera its frames, camera files, full scale,
+  threshold, PSF σ, object-space pixel, calibration residuals; ``in_view``);
 - ``truth_tracks.csv``: ``track_id, frame, time, X_mm, Y_mm, Z_mm, u, v, w, ax, ay, az``
   (time in field time units; with ``time_s`` velocity in m/s and acceleration in m/s²,
   without it in m per field time unit and m per field time unit squared; the header says
@@ -59,6 +66,7 @@ from rimcl.core.tables_h5 import (
     si_per_unit,
     write_variable,
 )
+from rimcl.lpt.openlpt_track import MANIFEST
 from rimcl.stats.render_file import THRESHOLD_SUFFIXES
 from rimcl.stats.tables import write_json
 
@@ -228,24 +236,31 @@ def frame_writer(outputs, scene):
 def write_dataset(outputs, run, result, scene, overwrite=True):
     """Files for LPT codes (layout in the module docstring) in the output set ``outputs``
     (:class:`rimcl.core.outputs.OutputSet`). Returns the (staging) directory."""
+    from rimcl.lpt.openlpt_files import write_camera_files
+
     folder = outputs.folder_path("dataset", result["case"])
+    cameras = result["cameras"]
+    # the target holds only points every camera sees (rimcl.lpt.run.calibrate_rig)
     target_mm = _to_mm(result["target"], run.length_m)
-    pixels = result["target_pixels"]
+    pixels = np.asarray(result["target_pixels"])
     columns = [target_mm] + [pixels[c] for c in range(len(pixels))]
     header = "X Y Z " + " ".join(f"x{c + 1} y{c + 1}" for c in range(len(pixels)))
+    names = ", ".join(f"x{c + 1} y{c + 1} = {camera.name}" for c, camera in enumerate(cameras))
     with atomic_path(folder / "calibration_points.txt", overwrite) as tmp:
         np.savetxt(
             tmp,
             np.hstack(columns),
             fmt="%.6f",
-            header=f"{header}\nX, Y, Z in mm (x2, x3, x1 of the field); x, y in px",
+            header=f"{header}\nX, Y, Z in mm from the field origin (X, Y, Z = field x2, x3, "
+            f"x1); x = column, y = row in px, pixel (0, 0) centred at (0, 0); {names}; "
+            f"{len(target_mm)} target points (only those every camera sees)",
         )
     to_field = np.zeros((4, 4))
     scale = 1e-3 / run.length_m
     for xyz, axis in enumerate(XYZ_AXES):
         to_field[axis, xyz] = scale
     to_field[3, 3] = 1.0
-    for c, camera in enumerate(result["cameras"]):
+    for c, camera in enumerate(cameras):
         pinhole = result["calibration"][c]["pinhole"]
         matrix_mm = np.asarray(pinhole["matrix"]) @ to_field
         write_json(
@@ -258,8 +273,63 @@ def write_dataset(outputs, run, result, scene, overwrite=True):
             },
             overwrite,
         )
+    openlpt = write_camera_files(
+        folder, cameras, result["calibration"], result["target"], overwrite
+    )
     write_truth_tracks(folder, run, overwrite)
+    write_json(folder / MANIFEST, _manifest(run, result, openlpt), overwrite)
     return folder
+
+
+def _manifest(run, result, openlpt):
+    """What :mod:`rimcl.lpt.openlpt_track` needs to run a tracker on the dataset."""
+    true_mm = _to_mm(run.true, run.length_m)
+    steps = np.linalg.norm(np.diff(true_mm, axis=0), axis=-1)
+    pixel_mm = [camera.pixel_size * run.length_m * 1e3 for camera in result["cameras"]]
+    # the view volume: where the tracers are in any frame, and a few pixels around
+    lo = np.nanmin(true_mm.reshape(-1, 3), axis=0)
+    hi = np.nanmax(true_mm.reshape(-1, 3), axis=0)
+    margin = 5.0 * max(pixel_mm)
+    frames = list(range(run.true.shape[0]))
+    dt = float(run.times[1] - run.times[0]) if len(frames) > 1 else None
+    cameras = []
+    for c, camera in enumerate(result["cameras"]):
+        files = openlpt[camera.name]
+        cameras.append(
+            {
+                "name": camera.name,
+                "images": [f"{camera.name}_frame{f:04d}.tif" for f in frames],
+                "openlpt_file": files.get("PINPLATE")
+                or files.get("PINHOLE")
+                or files["POLYNOMIAL"],
+                "openlpt_files": files,
+                "full_scale": int(result["sensor"]["full_scale"]),
+                "threshold_counts": float(result["exposure"]["thresholds"][c]),
+                "psf_sigma_px": float(camera.psf_sigma_px),
+                "pixel_mm": float(pixel_mm[c]),
+                "calibration_residual_px": {
+                    model: result["calibration"][c][model]["residual_px"]
+                    for model in ("pinhole", "soloff")
+                },
+            }
+        )
+    return {
+        "rimcl_schema": "lpt_dataset",
+        "case": result["case"],
+        "frames": frames,
+        "tracers": int(run.true.shape[1]),
+        "in_view": (np.asarray(result["flags"]) == 0).tolist(),
+        "dt": dt,
+        "dt_s": None if run.time_s is None or dt is None else dt * run.time_s,
+        "length_m": run.length_m,
+        "axes": "X, Y, Z = field x2, x3, x1 (mm from the field origin)",
+        "volume_mm": [
+            float(v) for pair in zip(lo - margin, hi + margin, strict=True) for v in pair
+        ],
+        "voxel_mm": float(np.mean(pixel_mm)),
+        "max_displacement_mm": float(np.nanmax(steps)) if steps.size else 0.0,
+        "cameras": cameras,
+    }
 
 
 def write_truth_tracks(folder, run, overwrite=True):

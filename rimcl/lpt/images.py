@@ -41,7 +41,7 @@ import numpy as np
 from rimcl.imaging.centroid import EXCLUDING, TracerFlag
 from rimcl.imaging.frames import THRESHOLD_VARIANTS, Imaging, image_batch
 from rimcl.imaging.mie import ray_weights
-from rimcl.imaging.render import FrameImage, Renderer, Window
+from rimcl.imaging.render import Renderer, Window
 from rimcl.imaging.sensor import FLOOR_PASS, MEASURED_PASS, REFERENCE_PASS, Sensor
 
 #: Pixel-coordinate origin of the renderer for LPT pixels (pixel centres at integers).
@@ -194,7 +194,7 @@ def device_imager(imaging, rays, tracers, device):
     return None if device is None else PointImager(imaging, rays, device, tracers)
 
 
-def locate_view(imaging, view, light, scale, key, canvas=None, imager=None):
+def locate_view(imaging, view, light, scale, key, imager=None):
     """Render, digitise and locate every tracer of a view.
 
     Parameters
@@ -207,8 +207,6 @@ def locate_view(imaging, view, light, scale, key, canvas=None, imager=None):
         Sensor units per unit of light (:attr:`Exposure.scale`).
     key : (int, int, int)
         ``(pass, frame, camera index)`` of the noise draws.
-    canvas : rimcl.imaging.render.FrameImage, optional
-        Receives each tracer's counts (the camera's frame).
     imager : rimcl.imaging.device.PointImager, optional
         The device engine of ``imaging`` and the view's rays per tracer
         (:func:`device_imager`); None: the NumPy engine.
@@ -223,7 +221,7 @@ def locate_view(imaging, view, light, scale, key, canvas=None, imager=None):
     pass_id, frame, camera_index = key
     ids = camera_index * count + np.arange(count)
     rays = (np.nan_to_num(view.images), usable, light, flags)
-    options = {"scales": np.full(count, scale), "canvas": canvas, "noise": (pass_id, frame, ids)}
+    options = {"scales": np.full(count, scale), "noise": (pass_id, frame, ids)}
     if imager is None:
         out = image_batch(imaging, *rays, **options)
     else:
@@ -241,11 +239,6 @@ def locate_view(imaging, view, light, scale, key, canvas=None, imager=None):
             for suffix, _ in THRESHOLD_VARIANTS
         },
     )
-
-
-def new_canvas(camera, sensor):
-    """An empty frame of ``camera``'s sensor."""
-    return FrameImage(camera.pixels[0], camera.pixels[1], sensor.full_scale)
 
 
 def noiseless(sensor):

@@ -42,12 +42,12 @@ from rimcl.lpt.calibration import PinholeModel, SoloffModel, target_points, tria
 from rimcl.lpt.config import CameraSpec, check_run_memory, preset_cameras
 from rimcl.lpt.config import describe as describe_scene
 from rimcl.lpt.flow import BUILTIN_DT, Volume, builtin_flow, volume_velocity
+from rimcl.lpt.frames import recorded_frame
 from rimcl.lpt.images import (
     PASSES,
     camera_imaging,
     device_imager,
     locate_view,
-    new_canvas,
     noiseless,
     ray_light,
     rig_exposure,
@@ -244,7 +244,7 @@ def _choose_rays(field, cameras, imagings, exposure, sensor, mie, points, tracer
             key = (PASSES["meas"], 0, c)
             imager = device_imager(quiet, light.shape[1], len(light), device)
             return locate_view(
-                quiet, seen, light, exposure.counts_per_light, key, None, imager
+                quiet, seen, light, exposure.counts_per_light, key, imager=imager
             ).centroid
 
         choices.append(
@@ -343,15 +343,10 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
                 if medium is not None:  # the floor images the reference's rays again
                     seen = view(medium, camera, run.true[k], choices[c]["rays"], tracer)
                 middle = time.perf_counter()
-                canvas = new_canvas(camera, sensor) if frame_sink and medium else None
+                light = ray_light(seen, mie)
+                key = (PASSES[kind], k, c)
                 found = locate_view(
-                    imagings[c],
-                    seen,
-                    ray_light(seen, mie),
-                    exposure.scale,
-                    (PASSES[kind], k, c),
-                    canvas,
-                    imagers[c],
+                    imagings[c], seen, light, exposure.scale, key, imager=imagers[c]
                 )
                 timings["views"] += middle - started
                 timings["images"] += time.perf_counter() - middle
@@ -363,8 +358,11 @@ def run_case(run, scene, case, device=None, progress=None, frame_sink=None):
                 peaks[kind][k, c] = found.peak
                 for suffix, (points, bits) in found.variants.items() if medium else ():
                     variants[kind, suffix][0][k, c], variants[kind, suffix][1][k, c] = points, bits
-                if canvas is not None:
-                    frame_sink(str(index.name), kind, camera, k, canvas.counts)
+                if frame_sink and medium is not None:
+                    frame = recorded_frame(
+                        imagings[c], seen, light, exposure.scale, key, camera.pixels
+                    )
+                    frame_sink(str(index.name), kind, camera, k, frame)
         if progress:
             progress(case, k + 1, frames)
     if not sensor.noise:
