@@ -283,3 +283,31 @@ def test_aiming_never_loses_a_chief_ray_that_a_scan_of_aims_reaches(device):
     landed = np.hypot(*chief_misses(camera, field, tracers, aimed.origins, options).T) / radius
     np.testing.assert_allclose(landed, aimed.miss, rtol=1e-9, atol=1e-12)
     assert (aimed.branches >= 1).all()
+
+
+def test_aiming_counts_the_separate_aims_that_reach_the_pupil(device):
+    """A tracer of the default study at C4 whose chief ray reaches the pupil from separate
+    aims (the field images it several times): the aim counts as many images as this
+    test's own brute-force scan finds separate regions of aims inside the pupil."""
+    from scipy import ndimage
+
+    from rimcl.fields.field_reader import FieldFile
+    from rimcl.fields.sample import SAMPLE_LENGTH_M, sample_path
+    from rimcl.optics.aiming import aim, chief_misses
+    from rimcl.scene.config import CameraConfig
+
+    tracers = np.array([[4.39891037, 1.02442798]])
+    with FieldFile(sample_path()) as ff:
+        field = ff.field(0, case="C4")
+    scene = Scene(0.0, 2 * np.pi, np.zeros(2), np.full(2, 2 * np.pi), True)
+    config = CameraConfig(kind="lens", length_m=SAMPLE_LENGTH_M, pupil_rays=16)
+    camera = config.build(scene, field.n_ref)
+    options = {"device": device, "precision": "f64", "interp": "trilinear"}
+    radius = 0.5 * camera.pupil.diameter
+    offsets = radius * np.arange(-16.0, 16.01, 0.25)
+    grid = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 2)
+    rows = np.repeat(tracers, len(grid), axis=0)
+    miss = np.hypot(*chief_misses(camera, field, rows, rows - grid, options).T) / radius
+    _, regions = ndimage.label((miss < 1.0).reshape(len(offsets), len(offsets)))
+    assert regions >= 2
+    assert aim(camera, field, tracers, options).branches[0] == regions

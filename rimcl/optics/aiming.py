@@ -41,7 +41,8 @@ KEEP_FIRST = 1e-3
 SCAN_SPACING = 1.0
 #: Largest half width of the aim scan, in pupil radii.
 SCAN_EXTENT = 16.0
-#: The scan reaches this many pupil radii beyond the uniform-fluid aim's largest miss.
+#: The scan reaches this many pupil radii beyond the field's largest displacement of the
+#: chief ray met.
 SCAN_MARGIN = 2.0
 #: Grid points whose miss is below this many pupil radii (and a local minimum) start Newton.
 SCAN_CANDIDATE = 3.0
@@ -135,30 +136,19 @@ def _newton(camera, field, positions, shift, trace_options, iterations):
     return best, best_size
 
 
-def _scan_extent(camera, field, positions, lateral, trace_options):
-    """Half width of the aim scan (field units), and the misses of the uniform-fluid aim.
-
-    An aim shift ``Δ`` brings the chief ray to the pupil centre where ``Δ = −d(Δ)``,
-    ``d`` the field's displacement of the chief ray on the pupil plane (``miss − Δ``): every
-    such aim lies within ``max |d|`` of the uniform one. The scan covers the largest
-    ``|d(0)|`` of the frame's tracers plus :data:`SCAN_MARGIN` pupil radii, at most
-    :data:`SCAN_EXTENT`.
-    """
-    radius = 0.5 * camera.pupil.diameter
-    miss = chief_misses(camera, field, positions, lateral, trace_options)
-    reach = np.nanmax(np.hypot(*miss.T), initial=0.0)
-    spacing = SCAN_SPACING * radius
-    extent = min(SCAN_EXTENT * radius, reach + SCAN_MARGIN * radius)
-    return spacing * np.ceil(extent / spacing - 1e-9)
-
-
-def _scan_starts(camera, field, positions, lateral, extent, trace_options):
+def _scan_starts(camera, field, positions, lateral, trace_options):
     """Newton starts from a scan of aim shifts: the grid's local minima of the miss.
 
-    Every tracer's chief ray is traced from a square grid of shifts (spacing
-    :data:`SCAN_SPACING` pupil radii, half width ``extent``); the grid points whose miss is a
-    local minimum among their 8 neighbours and below :data:`SCAN_CANDIDATE` pupil radii
-    (at most :data:`SCAN_STARTS` per tracer, the smallest first) start Newton.
+    An aim shift ``Δ`` brings the chief ray to the pupil centre where ``Δ = −d(Δ)``, ``d``
+    the field's displacement of the chief ray on the pupil plane (``miss − Δ``): such aims
+    lie no farther from the uniform-fluid aim than ``|d|`` reaches. Each tracer's chief ray
+    is traced from the shifts of a square grid (spacing :data:`SCAN_SPACING` pupil radii)
+    out to ``|d(0)|`` plus :data:`SCAN_MARGIN` radii, then on to the largest ``|d|`` met
+    there plus the margin where that reaches farther, at most :data:`SCAN_EXTENT` radii
+    (all tracers' chief rays in one trace per pass). Each tracer's scan depends on its own
+    rays only, so shards give the whole run's aims. The grid points whose miss is a local
+    minimum among their 8 neighbours and below :data:`SCAN_CANDIDATE` radii (at most
+    :data:`SCAN_STARTS` per tracer, the smallest first) start Newton.
 
     Returns
     -------
@@ -169,20 +159,38 @@ def _scan_starts(camera, field, positions, lateral, extent, trace_options):
     """
     radius = 0.5 * camera.pupil.diameter
     spacing = SCAN_SPACING * radius
-    side = round(extent / spacing)
+    side = round(SCAN_EXTENT / SCAN_SPACING)
+    margin = SCAN_MARGIN / SCAN_SPACING
     offsets = spacing * np.arange(-side, side + 1)
     grid = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 2)
-    count, points = len(positions), len(grid)
-    rows = np.repeat(positions, points, axis=0)
-    rows_lateral = np.repeat(lateral, points, axis=0)
-    shifts = np.tile(grid, (count, 1))
-    miss = chief_misses(camera, field, rows, rows_lateral - shifts, trace_options)
-    size = np.hypot(*miss.T).reshape(count, 2 * side + 1, 2 * side + 1)
-    size = np.where(np.isfinite(size), size, np.inf)
+    ring = np.rint(np.max(np.abs(grid), axis=1) / spacing)  # square ring of each grid point
+    count = len(positions)
+    size = np.full((count, len(grid)), np.inf)
+    with np.errstate(invalid="ignore"):
+        # |d(0)|: the uniform-fluid aim's miss
+        reach = np.hypot(*chief_misses(camera, field, positions, lateral, trace_options).T)
+    scanned = np.full(count, -1.0)
+    for _ in range(2):
+        reach = np.where(np.isfinite(reach), reach, 0.0)
+        wanted = np.minimum(side, np.ceil(reach / spacing - 1e-9) + margin)
+        rows, points = np.nonzero((ring[None] > scanned[:, None]) & (ring[None] <= wanted[:, None]))
+        if not len(rows):
+            break
+        shifts = grid[points]
+        with np.errstate(invalid="ignore"):
+            miss = chief_misses(
+                camera, field, positions[rows], lateral[rows] - shifts, trace_options
+            )
+            size[rows, points] = np.hypot(*miss.T)
+            displaced = np.hypot(*(miss - shifts).T)  # |d| at the scanned shifts
+        scanned = np.maximum(scanned, wanted)
+        reach = np.zeros(count)
+        np.maximum.at(reach, rows, np.where(np.isfinite(displaced), displaced, 0.0))
+    size = np.where(np.isfinite(size), size, np.inf).reshape(count, 2 * side + 1, 2 * side + 1)
     padded = np.pad(size, ((0, 0), (1, 1), (1, 1)), constant_values=np.inf)
     neighbours = np.stack(
         [
-            padded[:, 1 + a : 1 + a + 2 * side + 1, 1 + b : 1 + b + 2 * side + 1]
+            padded[:, 1 + a : 2 + a + 2 * side, 1 + b : 2 + b + 2 * side]
             for a in (-1, 0, 1)
             for b in (-1, 0, 1)
             if a or b
@@ -264,8 +272,7 @@ def aim(camera, field, positions, trace_options, iterations=AIM_ITERATIONS, scan
     )
     shifts, sizes, owners = [first], [first_size], [np.arange(count)]
     if scan:
-        extent = _scan_extent(camera, field, positions, lateral, trace_options)
-        tracer, starts = _scan_starts(camera, field, positions, lateral, extent, trace_options)
+        tracer, starts = _scan_starts(camera, field, positions, lateral, trace_options)
         if len(tracer):
             found, found_size = _newton(
                 camera, field, positions[tracer], starts, trace_options, iterations
