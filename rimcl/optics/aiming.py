@@ -10,13 +10,18 @@ sends in the directions that the field bends onto the pupil.
 
 Ray aiming, as optical design codes do it, finds that cone: for each tracer, the shift
 ``Δ`` of the aim points on the pupil plane that brings its chief ray (aimed at the pupil
-centre) to the pupil centre through the field, by the fixed-point iteration
-``Δ ← Δ − miss`` with the chief ray traced through the field each time (aiming at
-``A + Δ`` from ``x`` is aiming at ``A`` from ``x − Δ``, so the camera aims the rays from
-the shifted tracer :func:`aim_origins` gives, and they start at the tracer). Through a
-uniform medium the chief ray lands on the centre and ``Δ = 0``: the reference pass aims
-as before. The field bends neighbouring directions alike, so the shifted cone fills the
-pupil; the pupil test still decides, ray by ray, which are collected.
+centre) to the pupil centre through the field (aiming at ``A + Δ`` from ``x`` is aiming at
+``A`` from ``x − Δ``, so the camera aims the rays from the shifted tracer
+:func:`aim_origins` gives, and they start at the tracer). :func:`aim` finds it by Newton
+from the uniform-fluid aim, then by Newton from every basin a scan of shifts finds, so no
+chief ray that some scanned aim brings to the pupil is lost. Through a uniform medium the
+chief ray lands on the centre and ``Δ = 0``: the reference pass aims as before. The field
+bends neighbouring directions alike, so the shifted cone fills the pupil; the pupil test
+still decides, ray by ray, which are collected.
+
+Where the field folds the rays, several separate shifts bring the chief ray to the pupil:
+the lens sees the tracer several times (multiple images, physics). :attr:`Aim.branches`
+counts them; the tracer is imaged through one of them (:attr:`Aim.origins`).
 """
 
 import dataclasses
