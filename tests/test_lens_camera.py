@@ -247,3 +247,67 @@ def test_ray_aiming_brings_the_bent_chief_ray_to_the_pupil_centre(device):
     # differently, as the window does)
     share = collected(origins).reshape(len(tracers), -1).mean(axis=1)
     assert (share >= 0.9).all()
+
+
+def test_aiming_never_loses_a_chief_ray_that_a_scan_of_aims_reaches(device):
+    """Through the shipped sample at C4, Newton from the uniform-fluid aim ends pupil radii
+    off for some tracers (the field folds the aims: several basins); a brute-force scan of
+    aims over ±16 pupil radii (this test's own grid, finer than the aim's) finds a chief
+    ray inside the pupil for each. The aim (Newton, scan, Newton) lands at least as near
+    the pupil centre as the best of that grid for every tracer, and counts every image."""
+    from rimcl.fields.field_reader import FieldFile
+    from rimcl.fields.sample import SAMPLE_LENGTH_M, sample_path
+    from rimcl.optics.aiming import aim, chief_misses
+    from rimcl.scene.config import CameraConfig
+
+    # tracers of the default study (seed 0) where Newton alone failed at C4, frame 0
+    tracers = np.array([[0.63466152, 4.94502601], [4.17807813, 4.55977088]])
+    with FieldFile(sample_path()) as ff:
+        field = ff.field(0, case="C4")
+        scene = Scene(0.0, 2 * np.pi, np.zeros(2), np.full(2, 2 * np.pi), True)
+    config = CameraConfig(kind="lens", length_m=SAMPLE_LENGTH_M, pupil_rays=16)
+    camera = config.build(scene, field.n_ref)
+    options = {"device": device, "precision": "f64", "interp": "trilinear"}
+    radius = 0.5 * camera.pupil.diameter
+    newton_only = aim(camera, field, tracers, options, scan=False)
+    assert (newton_only.miss > 1.0).all()  # the old aim: both lost
+    offsets = radius * np.arange(-16.0, 16.01, 0.5)
+    grid = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 2)
+    rows = np.repeat(tracers, len(grid), axis=0)
+    scan = chief_misses(camera, field, rows, rows - np.tile(grid, (len(tracers), 1)), options)
+    scan_best = np.nanmin(np.hypot(*scan.T).reshape(len(tracers), -1), axis=1) / radius
+    assert (scan_best < 1.0).all()
+    aimed = aim(camera, field, tracers, options)
+    assert (aimed.miss <= scan_best).all()
+    assert (aimed.miss < 1e-3).all()
+    landed = np.hypot(*chief_misses(camera, field, tracers, aimed.origins, options).T) / radius
+    np.testing.assert_allclose(landed, aimed.miss, rtol=1e-9, atol=1e-12)
+    assert (aimed.branches >= 1).all()
+
+
+def test_aiming_counts_the_separate_aims_that_reach_the_pupil(device):
+    """A tracer of the default study at C4 whose chief ray reaches the pupil from separate
+    aims (the field images it several times): the aim counts as many images as this
+    test's own brute-force scan finds separate regions of aims inside the pupil."""
+    from scipy import ndimage
+
+    from rimcl.fields.field_reader import FieldFile
+    from rimcl.fields.sample import SAMPLE_LENGTH_M, sample_path
+    from rimcl.optics.aiming import aim, chief_misses
+    from rimcl.scene.config import CameraConfig
+
+    tracers = np.array([[4.39891037, 1.02442798]])
+    with FieldFile(sample_path()) as ff:
+        field = ff.field(0, case="C4")
+    scene = Scene(0.0, 2 * np.pi, np.zeros(2), np.full(2, 2 * np.pi), True)
+    config = CameraConfig(kind="lens", length_m=SAMPLE_LENGTH_M, pupil_rays=16)
+    camera = config.build(scene, field.n_ref)
+    options = {"device": device, "precision": "f64", "interp": "trilinear"}
+    radius = 0.5 * camera.pupil.diameter
+    offsets = radius * np.arange(-16.0, 16.01, 0.25)
+    grid = np.stack(np.meshgrid(offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 2)
+    rows = np.repeat(tracers, len(grid), axis=0)
+    miss = np.hypot(*chief_misses(camera, field, rows, rows - grid, options).T) / radius
+    _, regions = ndimage.label((miss < 1.0).reshape(len(offsets), len(offsets)))
+    assert regions >= 2
+    assert aim(camera, field, tracers, options).branches[0] == regions

@@ -477,3 +477,37 @@ def test_pupil_that_collects_no_ray_is_an_error(linear_file, device):
             device=device,
             **{**SMALL, "pixels": 256},
         )
+
+
+def test_split_images_are_located_by_their_brightest_component_when_asked(device):
+    """renderer.split = "brightest" (the paper preset): a split image, or one whose rays
+    spread past the window, keeps its brightest component's centroid and is only noted;
+    the images, positions and flag bits are those of "exclude", which leaves it out."""
+    import dataclasses
+
+    from rimcl.imaging.centroid import TracerFlag
+
+    options = {"tracers": 4, "fan": 12, "renderer": "paper", "pixels": 2048, "psf_sigma": 1.5}
+    config = MeasureConfig.from_options(
+        device=device, max_window=24, threshold=500.0, bit_depth=10, frames=1, **options
+    )
+    runs = {
+        split: run_render(
+            None,
+            case="C4",
+            config=dataclasses.replace(
+                config, renderer=dataclasses.replace(config.renderer, split=split)
+            ),
+        )
+        for split in ("exclude", "brightest")
+    }
+    excluded, kept = runs["exclude"].tracers, runs["brightest"].tracers
+    located = int(TracerFlag.SPLIT | TracerFlag.RAYS_OUTSIDE_WINDOW)
+    assert np.any(excluded["flags"] & located)  # the strong case splits or spreads them
+    np.testing.assert_array_equal(excluded["x2_meas"], kept["x2_meas"])
+    np.testing.assert_array_equal(
+        excluded["flags"] | excluded["notes"], kept["flags"] | kept["notes"]
+    )
+    assert not np.any(kept["flags"] & located)
+    np.testing.assert_array_equal(kept["notes"] & located, excluded["flags"] & located)
+    assert np.isfinite(kept["x2_meas"][kept["flags"] == 0]).all()

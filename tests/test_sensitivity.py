@@ -47,6 +47,23 @@ def test_excluded_tracers_count_with_their_optics_error(tmp_path):
     assert band["text"].startswith(f"depends on {EXCLUDED_BY_OPTICS} by +")
 
 
+def test_excluded_tracers_without_an_optics_image_are_not_counted_as_used(tmp_path):
+    """A tracer with no ray in any frame has no optics position (NaN): the variant that
+    counts the excluded tracers by their optics error uses the others only."""
+    path = tmp_path / "c4.h5"
+    write_render_file(path, case="C4", k_rho=0.334, n_tracers=40, flagged={3: 1, 7: 1, 9: 1})
+    with h5py.File(path, "a") as h5:
+        ids = h5["tracers/id"][...]
+        for c in ("2", "3"):
+            h5[f"tracers/x{c}_opt_ref"] = h5[f"tracers/x{c}_ref"][...]
+            optics = h5[f"tracers/x{c}_meas"][...].copy()
+            optics[ids == 7] = np.nan  # no ray in any frame
+            h5[f"tracers/x{c}_opt"] = optics
+    tables = load_render(path)
+    assert headline_values(tables)["n_used"] == 37
+    assert headline_values(tables, excluded_by_optics=True)["n_used"] == 39
+
+
 def test_a_band_reads_stable_inside_the_interval_and_names_the_largest_move():
     case = {"velocity": {"u3": {"rms_normalized": 0.32, "ci95": {"rms_normalized": [0.28, 0.36]}}}}
     path = "velocity.u3.rms_normalized"

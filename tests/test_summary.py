@@ -141,3 +141,22 @@ def test_significant_digits_without_exponents_in_the_readable_range():
     assert significant(3.2e-6) == "3.2e-06"
     assert with_interval(None, [1, 2]) == "n/a"
     assert with_interval(0.5, None, 100, " %") == "50.0 %"
+
+
+def test_tracers_with_several_images_are_counted_per_case(tmp_path, scene):
+    """The note multiple_images (several aims reach the lens's pupil) is counted per case in
+    stats.json (n_noted) and in summary.md."""
+    import json
+
+    import h5py
+
+    from rimcl.imaging.centroid import TracerFlag, flag_names
+
+    path = tmp_path / "C4.h5"
+    several = {tracer: int(TracerFlag.MULTIPLE_IMAGES) for tracer in (2, 5, 11)}
+    write_render_file(path, case="C4", k_rho=0.334, n_tracers=20, noted=several)
+    with h5py.File(path, "a") as h5:
+        h5.attrs["flag_names"] = json.dumps(flag_names())  # the real bits' names
+    stats = compute_stats([load_render(path)])
+    assert stats["cases"][0]["n_noted"]["multiple_images"] == 3
+    assert "pupil; physics, noted and kept): C4: 3" in summary_markdown(stats, scene)

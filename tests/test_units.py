@@ -215,7 +215,10 @@ def test_summary_leads_with_the_answer_in_physical_units(study):
     # the answer quotes the fitted tracks where there are any (what PTV codes report)
     group = "velocity_fit" if units.get("velocity_fit") else "velocity"
     total = units[group]["vector"]["rms_total"]
-    assert f"your velocity error is {total['mm_s']:.3g} mm/s" in text
+    assert f"your velocity error (the in-plane vector) is {total['mm_s']:.3g} mm/s" in text
+    # and the headline tables' number beside it: refraction in u3 alone, the same group
+    headline = 100 * stats["cases"][0][group]["u3"]["rms_normalized"]
+    assert f"in u3 alone (the tables' headline) refraction is {headline:.3g} % of rms u3" in text
     assert f"Δt = {units['scales']['dt_ms']:.3g} ms" in text
     median = units["position"]["median"]
     assert f"median position error {median['um']:.3g} µm ({median['px']:.3g} px)" in text

@@ -46,6 +46,7 @@ class TracerFlag(enum.IntFlag):
     RAYS_OUTSIDE_WINDOW = 64  # rays spread wider than the largest window; some light lost
     SATURATED = 128  # some pixel clipped at full scale
     OUTSIDE_FIELD = 256  # the true position left the field of view (clamped velocity)
+    MULTIPLE_IMAGES = 512  # several separate aims reach the pupil: the lens sees several images
 
 
 def flag_names():
@@ -54,7 +55,12 @@ def flag_names():
 
 
 NO_POSITION = TracerFlag.NO_RAYS | TracerFlag.BELOW_THRESHOLD
-NOTES = TracerFlag.RAYS_FAILED | TracerFlag.RAYS_VIGNETTED | TracerFlag.SATURATED
+NOTES = (
+    TracerFlag.RAYS_FAILED
+    | TracerFlag.RAYS_VIGNETTED
+    | TracerFlag.SATURATED
+    | TracerFlag.MULTIPLE_IMAGES
+)
 EXCLUDING = ~NOTES
 
 

@@ -47,6 +47,10 @@ from rimcl.imaging.render import Renderer
 from rimcl.imaging.sensor import NoiseKey, Sensor
 
 SCALINGS = ("reference", "per_image")
+#: What a split image (several components) or one whose rays spread past the window does
+#: to its tracer: ``exclude`` it from the statistics, or locate it by its ``brightest``
+#: component as a detection over a whole frame does (the paper's), noted.
+SPLIT_MODES = ("exclude", "brightest")
 #: Other thresholds every tracer is located at too: (column suffix, factor on the threshold).
 THRESHOLD_VARIANTS = (("threshold_half", 0.5), ("threshold_double", 2.0))
 #: The columns of a tracer located at one variant threshold (``<name>_<suffix>``).
@@ -99,6 +103,11 @@ class Imaging:
         (comparable images); ``per_image``: every image is scaled to its own
         peak, as the paper "rescaled to a 10-bit dynamic range" (a distorted image then
         keeps its full brightness and grows above the threshold).
+    split : {"exclude", "brightest"}
+        :data:`SPLIT_MODES`: ``exclude`` leaves a split image, or one whose rays spread
+        past the largest window, out of the statistics (flags ``split``,
+        ``rays_outside_window``); ``brightest`` keeps its brightest component's centroid,
+        as a detection over the whole frame finds it, and only notes the flags.
     """
 
     renderer: Renderer
@@ -106,8 +115,11 @@ class Imaging:
     centroid_weights: str = "excess"
     scaling: str = "reference"
     sensor: Sensor = None
+    split: str = "exclude"
 
     def __post_init__(self):
+        if self.split not in SPLIT_MODES:
+            raise RimclError(f"unknown split mode {self.split!r}; choose from {SPLIT_MODES}")
         if self.sensor is None:
             object.__setattr__(self, "sensor", Sensor(bit_depth=self.renderer.bit_depth))
         elif int(self.sensor.bit_depth) != int(self.renderer.bit_depth):

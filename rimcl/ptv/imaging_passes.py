@@ -22,7 +22,7 @@ from rimcl.core.errors import RimclError
 from rimcl.imaging.centroid import TracerFlag
 from rimcl.imaging.frames import empty_columns, image_batch
 from rimcl.imaging.sensor import FLOOR_PASS, MEASURED_PASS, REFERENCE_PASS
-from rimcl.optics.aiming import aim_origins
+from rimcl.optics.aiming import aim
 from rimcl.optics.straight import straight_path_limit, straight_rays
 from rimcl.optics.trace import STATUS_NAMES
 from rimcl.optics.tracing import trace_rays
@@ -72,13 +72,23 @@ def _image_frame(setup, pass_, frame, field, positions, scales=None, extras=None
     """
     # a lens's rays aimed at its pupil through this field (the same aim for both engines)
     start = time.perf_counter()
-    aim_from = aim_origins(setup.camera, field, positions, setup.trace_options)
+    aimed = aim(setup.camera, field, positions, setup.trace_options)
+    aim_from = aimed.origins
     setup.timings["trace"] += time.perf_counter() - start
     if setup.engine is not None:
         setup.engine.image_frame(
             setup, pass_, frame, field, positions, scales, extras, aim_from=aim_from
         )
-        return
+    else:
+        _image_batches(setup, pass_, frame, field, positions, scales, extras, aim_from)
+    # a tracer the field images several times (several aims reach the pupil), noted
+    several = np.where(aimed.branches > 1, int(TracerFlag.MULTIPLE_IMAGES), 0)
+    pass_.images["flags"][frame] |= several
+
+
+def _image_batches(setup, pass_, frame, field, positions, scales, extras, aim_from):
+    """The NumPy engine's part of :func:`_image_frame`: trace, render and locate the
+    tracers batch by batch, their rays aimed from ``aim_from`` (``(N, 2)``)."""
     extras = extras or {}
     camera, scene, timings = setup.camera, setup.scene, setup.timings
     rays = camera.rays_per_tracer

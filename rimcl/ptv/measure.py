@@ -146,8 +146,12 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
     frames, count = reference.tracks.shape[:2]
     ref, meas = reference.images, measured.images
     truth_flags = np.where(reference.outside, int(TracerFlag.OUTSIDE_FIELD), 0)
+    excluding, noting = int(EXCLUDING), int(NOTES)
+    if setup.imaging.split == "brightest":  # located by the brightest component, noted
+        located = int(TracerFlag.SPLIT | TracerFlag.RAYS_OUTSIDE_WINDOW)
+        excluding, noting = excluding & ~located, noting | located
     every = ref["flags"] | meas["flags"] | truth_flags
-    flags, notes = every & int(EXCLUDING), every & int(NOTES)
+    flags, notes = every & excluding, every & noting
 
     def rows(values):
         return np.asarray(values).reshape(-1)
@@ -216,7 +220,7 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
             tracers[f"x2_{kind}_{suffix}"], tracers[f"x3_{kind}_{suffix}"] = rows(x2), rows(x3)
             variant[kind] = np.stack([x2, x3], axis=-1)
         every = ref[f"flags_{suffix}"] | meas[f"flags_{suffix}"] | truth_flags
-        variant_flags = every & int(EXCLUDING)
+        variant_flags = every & excluding
         tracers[f"flags_{suffix}"] = rows(variant_flags)
         add_variant_columns(
             kinematics,
@@ -237,7 +241,7 @@ def _assemble(setup, config, reference, measured, sampler, delta_n_max):
         "pixel_size": renderer.pixel_size,
         "dt": setup.dt,
         "flag_names": json.dumps(flag_names()),
-        "note_bits": int(NOTES),
+        "note_bits": noting,
         "n_tracers": count,
         "n_frames": frames,
         "rays_per_tracer": camera.rays_per_tracer,

@@ -174,6 +174,8 @@ class RendererConfig:
         Bits per pixel of the camera, 8 to 16 (paper: 10).
     scaling : {"reference", "per_image"}
         See :class:`rimcl.imaging.frames.Imaging`.
+    split : {"exclude", "brightest"}
+        See :class:`rimcl.imaging.frames.Imaging`.
     """
 
     kind: str = "exact"
@@ -184,6 +186,7 @@ class RendererConfig:
     max_window: int = 512
     bit_depth: int = 10
     scaling: str = "reference"
+    split: str = "exclude"
 
     def build(self, scene, camera=None, sensor=None):
         """The :class:`rimcl.imaging.frames.Imaging` of a camera over the scene's field of view.
@@ -213,7 +216,9 @@ class RendererConfig:
             int(self.bit_depth),
         )
         sensor = Sensor(bit_depth=int(self.bit_depth)) if sensor is None else sensor
-        return Imaging(renderer, float(self.threshold), self.centroid_weights, self.scaling, sensor)
+        return Imaging(
+            renderer, float(self.threshold), self.centroid_weights, self.scaling, sensor, self.split
+        )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -551,6 +556,7 @@ class MeasureConfig:
                 max_window=renderer["max_window"],
                 bit_depth=renderer["bit_depth"],
                 scaling=renderer["scale"],
+                split=renderer["split"],
             ),
             integrator=IntegratorConfig(
                 interp=integrator["interp"],

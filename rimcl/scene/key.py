@@ -55,7 +55,7 @@ class SceneKey:
 def choices():
     """The allowed values of each ``str`` key that names a method, by kind of method."""
     from rimcl.imaging.centroid import CENTROID_WEIGHTS
-    from rimcl.imaging.frames import SCALINGS
+    from rimcl.imaging.frames import SCALINGS, SPLIT_MODES
     from rimcl.imaging.render import RENDERERS
     from rimcl.optics.camera import CAMERAS
     from rimcl.optics.trace import INTERPOLATIONS, PRECISIONS
@@ -68,5 +68,6 @@ def choices():
         "interp": INTERPOLATIONS,
         "precision": PRECISIONS,
         "scale": SCALINGS,
+        "split": SPLIT_MODES,
         "engine": ENGINES,
     }

@@ -270,6 +270,17 @@ def imaging_keys():
         ),
         SceneKey(
             "renderer",
+            "split",
+            "exclude",
+            "str",
+            "a tracer image split in several components, or whose rays spread past "
+            "max_window: exclude it from the statistics (flagged), or brightest: locate its "
+            "brightest component as a detection over the whole frame does (the paper's; "
+            "noted, counted)",
+            choices=choice["split"],
+        ),
+        SceneKey(
+            "renderer",
             "max_window",
             512,
             "int",

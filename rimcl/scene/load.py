@@ -96,6 +96,7 @@ PRESETS = {
             "threshold": 100.0,
             "centroid_weights": "grey",
             "scale": "per_image",
+            "split": "brightest",
             "bit_depth": 10,
         },
         "sensor": {"noise": False},

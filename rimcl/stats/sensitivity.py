@@ -92,7 +92,14 @@ def headline_values(tables, excluded_by_optics=False, threshold=None):
     excluded, _ = flagged_tracers(tables, flags)
     all_ids = np.unique(tables.tracers["id"].astype(np.int64))
     kept = np.setdiff1d(all_ids, excluded)
-    values = {"n_used": int(all_ids.size if excluded_by_optics else kept.size)}
+    values = {"n_used": int(kept.size)}
+    if excluded_by_optics and all(name in tables.tracers for name in OPTICS_COLUMNS["x"]):
+        # an excluded tracer counts where it has an optics image, in any frame (none where
+        # no ray reached the camera: its optics error is NaN and adds nothing)
+        others = rows_of(tables.tracers, excluded)
+        vectors = position_error_vectors(others, "opt", "opt_ref")
+        imaged = np.isfinite(vectors[0]) & np.isfinite(vectors[1])
+        values["n_used"] += int(np.unique(others["id"][imaged]).size)
     for path, group, component in HEADLINES:
         if group is None:
             tracers = tables.tracers

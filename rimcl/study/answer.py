@@ -88,10 +88,10 @@ def answer_lines(stats):
             share = _ratio(total["field"], truth["field"])
             text += (
                 f"; at your Δt = {dt} ({_fmt(truth.get('px_frame'))} px per frame rms), your "
-                f"velocity error is {_speed(total, 'mm_s')} rms, {_fmt(share)} % of the rms "
-                f"velocity {_speed(truth, 'mm_s')}; refraction alone is "
-                f"{_speed(velocity['rms_refraction'], 'mm_s')}, the measurement without "
-                f"refraction {_speed(velocity['rms_baseline'], 'mm_s')}"
+                f"velocity error (the in-plane vector) is {_speed(total, 'mm_s')} rms, "
+                f"{_fmt(share)} % of the rms velocity {_speed(truth, 'mm_s')}; refraction "
+                f"alone is {_speed(velocity['rms_refraction'], 'mm_s')}, the measurement "
+                f"without refraction {_speed(velocity['rms_baseline'], 'mm_s')}"
                 + (
                     f", the camera's noise alone (noise floor) "
                     f"{_speed(velocity['rms_noise_floor'], 'mm_s')}"
@@ -100,6 +100,12 @@ def answer_lines(stats):
                 )
                 + f" ({'sliding fit' if group.endswith('fit') else 'finite differences'})"
             )
+            u3 = units[group].get("u3")
+            if u3 is not None:  # the headline tables' number: refraction in u3 alone
+                ratio = _ratio(u3["rms_refraction"]["field"], u3["rms_truth"]["field"])
+                text += (
+                    f"; in u3 alone (the tables' headline) refraction is {_fmt(ratio)} % of rms u3"
+                )
         _, acceleration = _group(units, "acceleration")
         if acceleration is not None:
             total, truth = acceleration["rms_total"], acceleration["rms_truth"]

@@ -582,6 +582,17 @@ def summary_markdown(stats, study):
         for case in cases
     ]
     lines += ["", "Tracers left out (a tracer may carry several flags): " + "; ".join(excluded)]
+    several = [
+        f"{case['name']}: {case['n_noted'].get('multiple_images', 0)}"
+        for case in cases
+        if "multiple_images" in case.get("n_noted", {})
+    ]
+    if several:
+        lines += [
+            "",
+            "Tracers the field images several times (several aims of the lens reach its "
+            "pupil; physics, noted and kept): " + "; ".join(several),
+        ]
     lines += ["", *_convergence_lines(cases)]
     lines += _physical_lines(cases)
     lines += _dt_sweep_lines(stats.get("dt_sweep"))
