@@ -20,7 +20,7 @@ from rimcl.cli.options import (
     overwrite_option,
     scene_options,
 )
-from rimcl.study.summary import number
+from rimcl.study.summary_format import number
 
 window_option = click.option(
     "--window",

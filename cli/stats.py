@@ -3,7 +3,7 @@
 import click
 
 from rimcl.cli.options import handle_errors, overwrite_option
-from rimcl.study.summary import number, percent
+from rimcl.study.summary_format import number, percent
 
 #: What a user can change when a case keeps no tracer, by the flag that excluded them.
 _REMEDIES = {

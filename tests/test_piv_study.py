@@ -119,7 +119,7 @@ def test_cli_piv_mode_only(device, tmp_path):
 
 
 def test_verdict_names_the_cases_that_agree_and_those_that_differ():
-    from rimcl.study.summary import piv_verdict
+    from rimcl.study.summary_piv import piv_verdict
 
     def case(name, ratio, optics):
         both = {"ratio_rms_normalized": ratio, "optics_ratio_rms_normalized": optics}

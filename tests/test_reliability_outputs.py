@@ -185,7 +185,7 @@ position_mm = [700.0, {x2}, 50.0]
 look_at_mm = [50.0, 50.0, 50.0]
 focal_length_mm = 16.0
 f_number = 8.0
-sensor_pixels = [160, 100]
+sensor_pixels = [320, 200]
 """
 
 
@@ -194,7 +194,7 @@ def lpt_scene(tmp_path, lpt_flow, left="left", frames=5, name="scene.toml"):
     scene.write_text(
         f'[field]\npath = "{lpt_flow}"\n[cases]\nnames = ["C3"]\n'
         f"[tracers]\ncount = 4\n[time]\nframes = {frames}\ndt = 0.03\n"
-        "[lpt]\ncalibration_grid = [5, 4]\ncalibration_planes = 3\nimages = true\n"
+        "[lpt]\ncalibration_grid = [6, 5]\ncalibration_planes = 3\nimages = true\n"
         "self_calibration = false\nmax_rays = 4\nray_tolerance_px = 1.0\n"
         + CAMERA.format(name=left, x2=-300.0)
         + CAMERA.format(name="right", x2=400.0)

@@ -243,7 +243,7 @@ def test_the_command_line_marks_an_rms_that_has_not_converged(tmp_path, capsys):
     """The printed rms of a case whose tail carries it reads † with why, and the median and
     IQR of ε/truth beside it; an rms that converged reads plain."""
     from rimcl.cli.stats import echo_case_lines
-    from rimcl.study.summary import percent
+    from rimcl.study.summary_format import percent
 
     path = tmp_path / "c4.h5"
     write_render_file(path, case="C4", k_rho=0.334, n_tracers=40)

@@ -8,7 +8,8 @@ from rimcl.scene.load import load_scene
 from rimcl.scene.study_config import StudyConfig
 from rimcl.stats.document import compute_stats
 from rimcl.stats.render_file import load_render
-from rimcl.study.summary import significant, summary_markdown, with_interval
+from rimcl.study.summary import summary_markdown
+from rimcl.study.summary_format import significant, with_interval
 
 
 @pytest.fixture(scope="module")

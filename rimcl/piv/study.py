@@ -651,14 +651,21 @@ def case_file_problem(path, record, case):
             recorded = h5.attrs.get(STUDY_RECORD)
             if held != case:
                 return f"holds case {held!r}, not {case!r}"
-            recorded = None if recorded is None else json.loads(recorded)
-            if recorded is None or recorded != json.loads(to_json(record)):
-                # a field file rewritten since: said as such, not as another scene
-                changes = input_changes((recorded or {}).get("inputs"), record.get("inputs", {}))
+            recorded = {} if recorded is None else json.loads(recorded)
+            current = json.loads(to_json(record))
+            if recorded != current:
+                if _without_inputs(recorded) != _without_inputs(current):
+                    return "made for another scene"
+                # the same scene, a field file rewritten since: said as such
+                changes = input_changes(recorded.get("inputs"), record.get("inputs", {}))
                 return "; ".join(changes) if changes else "made for another scene"
     except (OSError, ValueError) as exc:
         return f"unreadable ({type(exc).__name__})"
     return None
+
+
+def _without_inputs(record):
+    return {key: value for key, value in record.items() if key != "inputs"}
 
 
 def run_study_cases(

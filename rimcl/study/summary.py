@@ -10,12 +10,10 @@ the number of tracers (:func:`rimcl.stats.convergence.not_converged`). Every val
 with its bootstrap 95 % interval, and a statistic of an empty sample reads ``n/a``.
 """
 
-import math
 from datetime import datetime, timezone
 
 from rimcl import __version__
 from rimcl.optics.camera import DEFAULT_F_NUMBER
-from rimcl.piv.comparison import COMPARED
 from rimcl.stats.sensitivity import FILE_VARIANTS, MEASURED_VARIANTS, THRESHOLD_NAMES
 from rimcl.stats.summaries import (
     INFLUENCE_LIMIT,
@@ -24,6 +22,8 @@ from rimcl.stats.summaries import (
     TOP_SHARE_LIMIT,
 )
 from rimcl.study.answer import answer_lines, lens_lines, scene_warnings, warning_lines
+from rimcl.study.summary_format import number, percent_of, significant, table, with_interval
+from rimcl.study.summary_piv import piv_lines
 
 PAPER_SOURCE = (
     "H. Li, A. Fischer, M. Avila, D. Xu, *Measurement error of tracer-based velocimetry in "
@@ -70,68 +70,16 @@ QUANTITIES = (
 )
 
 
-def significant(value, digits=3):
-    """``value`` to ``digits`` significant digits, without an exponent between 1e-3 and
-    1e6 (``2134`` reads ``2130``, not ``2.13e+03``)."""
-    if value == 0 or not 1e-3 <= abs(value) < 1e6:
-        return f"{value:.{digits}g}"
-    decimals = digits - 1 - math.floor(math.log10(abs(value)))
-    return f"{round(value, decimals):.{max(decimals, 0)}f}"
-
-
-def percent(value):
-    """A fraction as percent with 3 significant digits, ``n/a`` for ``None``."""
-    return "n/a" if value is None else f"{significant(100 * value)} %"
-
-
-def number(value):
-    """A number with 3 significant digits, ``n/a`` for ``None``."""
-    return "n/a" if value is None else f"{value:.3g}"
-
-
-def with_interval(value, interval, scale=1.0, unit=""):
-    """``value [lo, hi]``: 3 significant digits for the value, 2 for the interval's ends.
-
-    Parameters
-    ----------
-    value : float or None
-    interval : [float, float] or None
-    scale : float
-        Factor applied to all three (100 for percent).
-    unit : str
-        Appended after the interval (``" %"``).
-    """
-    if value is None:
-        return "n/a"
-    text = significant(scale * value)
-    if interval is not None:
-        text += f" [{significant(scale * interval[0], 2)}, {significant(scale * interval[1], 2)}]"
-    return text + unit
-
-
-def _percent_of(summary, key):
-    return with_interval(summary[key], summary["ci95"][key], 100.0, " %")
-
-
 def _marked(case, path, text):
     """``text`` with the not-converged mark when ``path`` is listed for the case."""
     growing = case.get("convergence", {}).get("not_converged", [])
     return f"{text} {NOT_CONVERGED}" if path in growing else text
 
 
-def _table(header, rows):
-    """A Markdown table; a ``|`` inside a cell (``|ε_x|``) is escaped."""
-
-    def line(cells):
-        return "| " + " | ".join(cell.replace("|", "\\|") for cell in cells) + " |"
-
-    return [line(header), "|" + "---|" * len(header), *(line(row) for row in rows)]
-
-
 def _ratio_cell(case, path, summary, key):
     """A paper's ratio statistic with its mark, its influence (the share of Σ(ε/truth)²
     carried by the 3 largest rows) and its conditioned value beside it."""
-    text = _marked(case, path, _percent_of(summary, key))
+    text = _marked(case, path, percent_of(summary, key))
     share = summary.get("influence")
     if share is not None and share > INFLUENCE_LIMIT and not text.endswith(NOT_CONVERGED):
         text += f" {NOT_CONVERGED}"  # carried by a few rows, also where not followed over N
@@ -140,7 +88,7 @@ def _ratio_cell(case, path, summary, key):
     if share is not None:
         extras.append(f"top-3 share {significant(share, 2)}")
     if conditioned is not None:
-        extras.append(f"conditioned {_percent_of(conditioned, key)}")
+        extras.append(f"conditioned {percent_of(conditioned, key)}")
     return f"{text} ({'; '.join(extras)})" if extras else text
 
 
@@ -181,7 +129,7 @@ def _peak_cell(case):
 def _rms_cell(case, path, summary):
     """The rms ratio with its mark and, where it is marked, why: the share of Σε² its
     largest tracers carry and the errors' tail index (:func:`rms_reasons`)."""
-    text = _marked(case, path, _percent_of(summary, "rms_normalized"))
+    text = _marked(case, path, percent_of(summary, "rms_normalized"))
     reasons = case.get("convergence", {}).get("reasons", {}).get(path, [])
     extras = []
     if "few tracers" in reasons:
@@ -205,14 +153,14 @@ def _headline_rows(cases, group, component):
         rows.append(
             [
                 case["name"],
-                _marked(case, f"{path}.median", _percent_of(summary, "median")),
-                _marked(case, f"{path}.iqr", _percent_of(summary, "iqr")),
+                _marked(case, f"{path}.median", percent_of(summary, "median")),
+                _marked(case, f"{path}.iqr", percent_of(summary, "iqr")),
                 _rms_cell(case, f"{path}.rms_normalized", summary),
-                _marked(case, f"{path}.conditioned_median", _percent_of(conditioned, "median")),
-                _marked(case, f"{path}.conditioned_iqr", _percent_of(conditioned, "iqr")),
+                _marked(case, f"{path}.conditioned_median", percent_of(conditioned, "median")),
+                _marked(case, f"{path}.conditioned_iqr", percent_of(conditioned, "iqr")),
                 _rms_cell(case, f"{path}.conditioned_rms_normalized", conditioned),
                 f"{conditioned['n']}/{summary['n']}",
-                _percent_of(baseline, "rms_normalized"),
+                percent_of(baseline, "rms_normalized"),
             ]
         )
     return rows
@@ -265,13 +213,13 @@ def _budget_lines(cases):
                 floor["position_error_median_over_L"], floor["position_error_median_over_L_ci95"]
             )
         )
-        row += [_percent_of(part["velocity"]["u3"], "rms_normalized") for part in parts]
+        row += [percent_of(part["velocity"]["u3"], "rms_normalized") for part in parts]
         row.append(
-            "n/a" if floor is None else _percent_of(floor["velocity"]["u3"], "rms_normalized")
+            "n/a" if floor is None else percent_of(floor["velocity"]["u3"], "rms_normalized")
         )
-        row.append(_percent_of(case["baseline"]["velocity"]["u3"], "rms_normalized"))
+        row.append(percent_of(case["baseline"]["velocity"]["u3"], "rms_normalized"))
         rows.append(row)
-    lines += _table(header, rows)
+    lines += table(header, rows)
     verdicts = [case["budget_verdict"]["text"] for case in with_budget if case["budget_verdict"]]
     lines += [
         "",
@@ -385,7 +333,7 @@ def _sensitivity_lines(cases, study):
         ]
         for case in with_bands
     ]
-    return [*lines, *_table(header, rows), ""]
+    return [*lines, *table(header, rows), ""]
 
 
 def _physical_lines(cases):
@@ -532,7 +480,7 @@ def summary_markdown(stats, study):
         ]
         for case in cases
     ]
-    lines += [*_table(header, rows), ""]
+    lines += [*table(header, rows), ""]
     for group, component, heading in QUANTITIES:
         if not all(group in case for case in cases):
             continue
@@ -548,7 +496,7 @@ def summary_markdown(stats, study):
             "tracers: not small/all",
             "baseline rms ratio",
         ]
-        lines += [f"**{heading}**", "", *_table(header, _headline_rows(cases, group, component))]
+        lines += [f"**{heading}**", "", *table(header, _headline_rows(cases, group, component))]
         lines.append("")
     lines += _budget_lines(cases)
     lines += _sensitivity_lines(cases, study)
@@ -575,7 +523,7 @@ def summary_markdown(stats, study):
         "a3 systematic",
         "a3 random",
     ]
-    lines += _table(header, [_case_row(case) for case in cases])
+    lines += table(header, [_case_row(case) for case in cases])
     excluded = [
         f"{case['name']}: "
         + (", ".join(f"{n} {name}" for name, n in case["n_excluded"].items() if n) or "none")
@@ -641,171 +589,6 @@ def summary_markdown(stats, study):
             truth_row = _case_row(case, "against_truth")
             rows.append([f"rimcl, {name}, vs truth (the paper's ε)", row[2], "—", *truth_row[5:]])
         rows.append([f"rimcl, {name}, vs reference (refraction)", row[2], row[4], *row[5:]])
-    lines += _table(header, rows)
+    lines += table(header, rows)
     lines += ["", f"Paper: {PAPER_SOURCE}. Where: {PAPER_CITATIONS}", ""]
     return "\n".join(lines + piv_lines(stats))
-
-
-#: PIV and PTV refraction errors of a case "agree" when the ratio of their
-#: rms(ε_|u|)/rms(|u|) lies within this factor either way.
-PIV_AGREEMENT_FACTOR = 2.0
-
-
-def _agreement(stats, key):
-    """Cases whose PIV/PTV ratio ``key`` of ``|u|`` lies within the factor, and the others."""
-    agree, differ = [], []
-    for case in stats["cases"]:
-        ratio = case.get("piv_vs_ptv", {}).get("magnitude", {}).get(key)
-        if ratio is not None:
-            within = 1 / PIV_AGREEMENT_FACTOR <= ratio <= PIV_AGREEMENT_FACTOR
-            (agree if within else differ).append(f"{case['name']} ({significant(ratio, 2)})")
-    return agree, differ
-
-
-def _agreement_sentence(agree, differ, what):
-    factor = f"a factor {PIV_AGREEMENT_FACTOR:g}"
-    if not differ:
-        return f"{what} **agree** within {factor} in every case: {', '.join(agree)}."
-    if not agree:
-        return f"{what} **differ** by more than {factor}: {', '.join(differ)}."
-    return (
-        f"{what} **agree** within {factor} in {', '.join(agree)} and **differ** in "
-        f"{', '.join(differ)}."
-    )
-
-
-def piv_verdict(stats):
-    """One line: do the PIV and PTV refraction errors of ``|u|`` agree, case by case (and
-    their optics parts, where the PTV cases have them)?"""
-    agree, differ = _agreement(stats, "ratio_rms_normalized")
-    if not agree and not differ:
-        return 'No PTV case to compare with (run.mode = "piv").'
-    line = "**Verdict:** " + _agreement_sentence(
-        agree, differ, "PIV and PTV errors (PIV/PTV of rms(ε_|u|)/rms(|u|))"
-    )
-    agree, differ = _agreement(stats, "optics_ratio_rms_normalized")
-    if agree or differ:
-        line += " " + _agreement_sentence(agree, differ, "Their optics parts (rays only)")
-    return line
-
-
-def _px_and_mm_s(piv, key):
-    """An rms displacement of a PIV case in pixels, and in mm/s where the scales give it."""
-    text = number(piv["displacement_px"][key])
-    mm_s = ((piv.get("units") or {}).get(key) or {}).get("mm_s")
-    return text if mm_s is None else f"{text} ({number(mm_s)} mm/s)"
-
-
-def piv_lines(stats):
-    """The PIV section of ``summary.md`` (no lines without PIV results): what was
-    measured, the errors per case beside PTV's, and :func:`piv_verdict`."""
-    cases = [case for case in stats["cases"] if "piv" in case]
-    if not cases:
-        return []
-    first = cases[0]["piv"]
-    settings = first["piv"]
-    factors = (first.get("units") or {}).get("scales") or {}
-    pixel, dt = f"{first['pixel_size_over_L']:.3g} L", f"{first['dt']:.3g}"
-    if factors.get("pixel_um") is not None:
-        pixel += f" = {factors['pixel_um']:.3g} µm"
-    if factors.get("dt_ms") is not None:
-        dt += f" = {factors['dt_ms']:.3g} ms"
-    lines = [
-        "",
-        "## PIV beside PTV",
-        "",
-        f"PIV frames of {first['n_tracers']} tracers across a Gaussian light sheet "
-        f"(pixel = {pixel}), Δt = {dt}, "
-        f"{settings['passes']} passes down to {settings['window']} px windows "
-        f"(overlap {settings['overlap']:g}); cases in `piv/<case>.h5`, figures "
-        f"`figures/piv_*`. Motion: {first['motion']}.",
-        "",
-        "Refraction error of a vector: measured through the field minus measured through a "
-        "uniform medium on the same tracers (pixels, rms over the vectors used); *optics*: "
-        "the window average of the rays' image-point shifts; *baseline*: the uniform-medium "
-        "vector minus the window-averaged truth (the PIV method's own error). Relative "
-        "errors with their bootstrap 95 % intervals (each vector one sample: overlapping "
-        "windows share tracers, so the intervals are too narrow); `stats.json`: `piv` and "
-        "`piv_vs_ptv` per case. Where the field's scales are known, each rms in pixels is "
-        "followed by the same in mm/s (`units` per case).",
-        "",
-    ]
-    header = [
-        "case",
-        "G",
-        "vectors used",
-        "truth rms (px)",
-        "refraction rms (px)",
-        "optics rms (px)",
-        "baseline rms (px)",
-        "PIV rms(ε)/rms(u3)",
-        "PIV rms(ε)/rms(|u|)",
-        "PTV rms(ε)/rms(|u|)",
-        "PIV/PTV",
-        "optics PIV/PTV",
-    ]
-    rows = []
-    for case in cases:
-        piv = case["piv"]
-        compared = case.get("piv_vs_ptv", {}).get("magnitude", {})
-        rows.append(
-            [
-                case["name"],
-                number(piv["G"]),
-                f"{piv['n_used']}/{piv['n_vectors']}",
-                *(
-                    _px_and_mm_s(piv, key)
-                    for key in ("truth_rms", "refraction_rms", "optics_rms", "baseline_rms")
-                ),
-                _percent_of(piv["velocity"]["u3"], "rms_normalized"),
-                _percent_of(piv["velocity"]["magnitude"], "rms_normalized"),
-                _percent_of(case["velocity"]["magnitude"], "rms_normalized")
-                if "velocity" in case
-                else "n/a",
-                number(compared.get("ratio_rms_normalized")),
-                number(compared.get("optics_ratio_rms_normalized")),
-            ]
-        )
-    return [
-        *lines,
-        *_table(header, rows),
-        "",
-        *_settings_lines(cases),
-        piv_verdict(stats),
-        "",
-    ]
-
-
-def _settings_lines(cases):
-    """PTV's and PIV's settings side by side, and whether the ratios compare like for like."""
-    settings = next(
-        (c["piv_vs_ptv"]["settings"] for c in cases if "settings" in c.get("piv_vs_ptv", {})),
-        None,
-    )
-    if settings is None:
-        return []
-    rows = [
-        [name, _setting(settings["ptv"][key]), _setting(settings["piv"][key])]
-        for key, name in COMPARED
-    ]
-    names = dict(COMPARED)
-    if settings["like_for_like"]:
-        verdict = (
-            "PTV and PIV measured **like for like**: the same Δt, camera, pixel, rays and bits."
-        )
-    else:
-        differ = ", ".join(names[key] for key in settings["differ"])
-        verdict = (
-            f"**Not like for like**: PTV and PIV differ in {differ}, so the ratios compare "
-            "the two measurements as set up, not the two methods (a velocity error from a "
-            "position error scales as 1/Δt). Set `[piv]` `dt`, `rays` and `bit_depth` to "
-            "PTV's (`time.dt`, the camera's rays, `renderer.bit_depth`) to compare the "
-            "methods."
-        )
-    return [*_table(["setting", "PTV", "PIV"], rows), "", verdict, ""]
-
-
-def _setting(value):
-    if isinstance(value, bool):
-        return "on" if value else "off"
-    return number(value) if isinstance(value, float) else str(value)
