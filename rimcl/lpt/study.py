@@ -65,8 +65,11 @@ def run_lpt_study(study, out_dir, *, force=False, figures=True, report=None):
         say(f"lpt: cases {', '.join(study.names)}")
 
         def progress(case, frame, frames):
-            if frame == frames:
-                say(f"lpt {case}: {frames} frames done")
+            # every frame: a case runs minutes on a CPU, never silent for all of them
+            say(
+                f"lpt {case}: frame {frame}/{frames}"
+                + (", triangulating" if frame == frames else "")
+            )
 
         document = run_lpt(
             lpt_scene,
