@@ -268,14 +268,21 @@ def test_lpt_overwrite_replaces_the_set_and_a_failed_run_keeps_the_old(
         assert set(h5["cameras"]) == {"west", "right"}
 
 
-def test_stats_overwrite_without_figures_removes_the_old_figures(tmp_path):
+def test_stats_overwrite_without_figures_removes_the_old_figures(tmp_path, monkeypatch):
+    import rimcl.stats.figures
+
+    def draw(all_tables, stats, folder, overwrite=True):  # the figures' files, not drawn
+        for name in ("errors.png", "errors.json"):
+            (folder / name).write_text(name)
+
+    monkeypatch.setattr(rimcl.stats.figures, "write_figures", draw)
     files = []
     for name, g in (("C1", 2.82e-4), ("C4", 0.334)):
         files.append(tmp_path / f"{name}.h5")
         write_render_file(files[-1], case=name, k_rho=g, n_tracers=30)
     out = tmp_path / "stats"
     assert run("stats", *files, "--out", out).exit_code == 0
-    assert list((out / "figures").glob("*.png"))
+    assert sorted(p.name for p in (out / "figures").iterdir()) == ["errors.json", "errors.png"]
     result = run("stats", *files, "--out", out, "--no-figures", "--overwrite")
     assert result.exit_code == 0, result.output
     assert not (out / "figures").exists()
