@@ -35,7 +35,12 @@ def test_print_default_scene_is_the_default(tmp_path):
     assert result.exit_code == 0
     path = tmp_path / "scene.toml"
     path.write_text(result.output)
-    assert load_scene(path) == default_scene()
+    # the defaults, and the shipped sample's own time scale (filled where the scene has none)
+    loaded, defaults = load_scene(path), default_scene()
+    assert loaded == load_scene()
+    assert defaults["field"]["time_s"] is None and loaded["field"]["time_s"] > 0
+    loaded["field"]["time_s"] = None
+    assert loaded == defaults
 
 
 def test_study_needs_an_output_directory():

@@ -123,7 +123,12 @@ def test_a_dim_two_tracer_run_is_an_n_a_answer(tmp_path, lpt_flow):
     assert case["tracers_kept"] == 0 and case["no_tracer"].startswith("no tracer kept of 2")
     assert case["position"]["x2"]["refraction"]["rms"] is None
     assert "n/a" in case["self_calibration"]
-    assert sorted(p.name for p in out.iterdir()) == ["lpt_case_C3.h5", "lpt_stats.json"]
+    # the run's files and the output set's manifest (rimcl.core.outputs), nothing else
+    assert sorted(p.name for p in out.iterdir()) == [
+        ".rimcl-outputs.json",
+        "lpt_case_C3.h5",
+        "lpt_stats.json",
+    ]
     # a study draws its figures from it: empty panels, no warning (errors under pytest)
     from rimcl.lpt.figures import write_lpt_figures
 

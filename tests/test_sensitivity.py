@@ -201,9 +201,9 @@ def test_a_default_study_shows_the_threshold_band_of_every_headline_number(devic
         "tracers.count": 12,
         "camera.pupil_rays": 32,
         "time.frames": 5,
-        # 15 % of the reference peak: high enough that the doubled threshold loses C3's
-        # dim, spread images
-        "renderer.threshold": 200.0,
+        # 400 counts (10 % of the 12-bit full scale): high enough that the doubled
+        # threshold loses C3's dim, spread images (through the default f/11 lens)
+        "renderer.threshold": 400.0,
         "run.device": device.name,
     }
     result = run_study(load_scene(None, overrides), tmp_path, figures=False)

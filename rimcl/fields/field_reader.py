@@ -561,3 +561,16 @@ def field_kind(path):
     """What a field file stores, ``"density"`` or ``"delta_n"`` (metadata only)."""
     with FieldFile(path) as ff:
         return ff.kind
+
+
+def recorded_scales(path):
+    """``length_m`` and ``time_s`` a field file records (nothing for a missing or foreign
+    file: its errors come where it is opened)."""
+    if not path or not Path(path).is_file():
+        return {}
+    try:
+        with h5py.File(path, "r") as h5:
+            found = {key: float(h5.attrs[key]) for key in ("length_m", "time_s") if key in h5.attrs}
+    except (OSError, TypeError, ValueError):
+        return {}
+    return {k: v for k, v in found.items() if math.isfinite(v) and v > 0}

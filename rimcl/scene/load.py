@@ -20,6 +20,7 @@ import textwrap
 from pathlib import Path
 
 from rimcl.core.errors import RimclError
+from rimcl.fields.field_reader import recorded_scales
 from rimcl.scene.keys import SCENE_KEYS, SECTIONS, default_scene
 from rimcl.scene.validate import validate_scene
 
@@ -220,11 +221,11 @@ def field_scales(scene, where):
     recorded = {}
     if field["length_m"] is None or field["time_s"] is None:
         if field["path"]:
-            recorded = _recorded_scales(field["path"])
+            recorded = recorded_scales(field["path"])
         else:
             from rimcl.fields.sample import sample_path
 
-            recorded = {"time_s": _recorded_scales(sample_path()).get("time_s")}
+            recorded = {"time_s": recorded_scales(sample_path()).get("time_s")}
     if field["length_m"] is None:
         field["length_m"] = recorded.get("length_m")
     if field["velocity_m_s"] is not None:
@@ -240,21 +241,6 @@ def field_scales(scene, where):
     elif field["time_s"] is None:
         field["time_s"] = recorded.get("time_s")
     return scene
-
-
-def _recorded_scales(path):
-    """``length_m`` and ``time_s`` a field file records (nothing for a missing or foreign
-    file: its errors come where it is opened)."""
-    import h5py
-
-    if not path or not Path(path).is_file():
-        return {}
-    try:
-        with h5py.File(path, "r") as h5:
-            found = {key: float(h5.attrs[key]) for key in ("length_m", "time_s") if key in h5.attrs}
-    except (OSError, TypeError, ValueError):
-        return {}
-    return {k: v for k, v in found.items() if math.isfinite(v) and v > 0}
 
 
 def scene_text(scene):

@@ -153,6 +153,17 @@ def _sources(names, given):
     return " and ".join(dict.fromkeys(given[name] for name in names))
 
 
+def _default(key, scene):
+    """The value a scene gets without ``key``: its default, but for ``field.time_s`` of the
+    shipped sample the sample's own time scale (a study's ``scene.toml`` records it)."""
+    if key.dotted == "field.time_s" and not scene["field"]["path"]:
+        from rimcl.fields.field_reader import recorded_scales
+        from rimcl.fields.sample import sample_path
+
+        return recorded_scales(sample_path()).get("time_s")
+    return key.default
+
+
 def check_use(scene, given, command):
     """Refuse the keys a command's kind never uses; name those the command alone ignores.
 
@@ -183,7 +194,7 @@ def check_use(scene, given, command):
     changed = [
         key.dotted
         for key in SCENE_KEYS
-        if key.dotted in given and scene[key.section][key.name] != key.default
+        if key.dotted in given and scene[key.section][key.name] != _default(key, scene)
     ]
     foreign = [name for name in changed if not users(name) & kind]
     if foreign:
