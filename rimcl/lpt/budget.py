@@ -15,18 +15,13 @@ parts, the noise floor and the baseline, from the tracks' sliding polynomial fit
 - **refraction_self_calibrated** ``vsc − ref`` where the volume self-calibration ran.
 """
 
+from rimcl.lpt.units import ERRORS
+
 #: Track kinds each fitted: the located and the optics tracks of both media, the floor's
 #: second exposure, the self-calibrated tracks.
 FIT_KINDS = ("meas", "ref", "opt_meas", "opt_ref", "floor", "vsc")
 #: The error terms of :func:`kinematic_errors`, in the order they are printed.
-TERMS = (
-    "refraction",
-    "optics",
-    "imaging",
-    "noise_floor",
-    "baseline",
-    "refraction_self_calibrated",
-)
+TERMS = ERRORS
 
 
 def kinematic_errors(fits, attribute, truth):

@@ -24,19 +24,13 @@ field's origin, ``length_m`` metres per field unit); the cameras sit beyond the 
 
 import dataclasses
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 
-from rimcl.core.errors import RimclError
+from rimcl.scene.load import read_scene_file
 from rimcl.scene.lpt_config import CameraSpec, IlluminationConfig, LptSettings, RigConfig
 from rimcl.scene.study_config import StudyConfig
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover - Python 3.10
-    import tomli as tomllib
 
 __all__ = [
     "CameraSpec",
@@ -136,18 +130,7 @@ def load_lpt_scene(path=None, overrides=None):
     if path is not None:
         path = Path(path)
         where = str(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise RimclError(f"cannot read scene file {path}: {exc.strerror}") from None
-        except UnicodeDecodeError:
-            raise RimclError(
-                f"scene file {path} is not text (a TOML scene is UTF-8 text)"
-            ) from None
-        try:
-            raw = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise RimclError(f"{path} is not valid TOML: {exc}") from None
+        raw = read_scene_file(path)
         field = raw.get("field")
         if isinstance(field, dict) and isinstance(field.get("path"), str) and field["path"]:
             # a scene names its field relative to itself, as rimcl study reads it

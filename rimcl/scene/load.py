@@ -112,6 +112,29 @@ PRESETS = {
 }
 
 
+def read_scene_file(path):
+    """The tables of a TOML scene file, or one clear error (unreadable, not text, not TOML).
+
+    Parameters
+    ----------
+    path : pathlib.Path
+
+    Returns
+    -------
+    dict
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise RimclError(f"cannot read scene file {path}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise RimclError(f"scene file {path} is not text (a TOML scene is UTF-8 text)") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RimclError(f"{path} is not valid TOML: {exc}") from None
+
+
 def load_scene(path=None, overrides=None, preset=None, command=None, report=None):
     """Read a scene file (or the defaults), apply overrides, check everything.
 
@@ -148,18 +171,7 @@ def load_scene(path=None, overrides=None, preset=None, command=None, report=None
     if path is not None:
         path = Path(path)
         where = str(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise RimclError(f"cannot read scene file {path}: {exc.strerror}") from None
-        except UnicodeDecodeError:
-            raise RimclError(
-                f"scene file {path} is not text (a TOML scene is UTF-8 text)"
-            ) from None
-        try:
-            from_file = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise RimclError(f"{path} is not valid TOML: {exc}") from None
+        from_file = read_scene_file(path)
         given.update(_dotted(from_file, path.name))
         for section, table in from_file.items():
             if isinstance(table, dict) and isinstance(raw.get(section), dict):
