@@ -12,9 +12,10 @@
 # 3. the device tests run with the GPU as the test device;
 # 4. a fixed ray set is traced for comparison with PoCL (device_agreement.py compare);
 # 5. ray-steps/s per interpolation and precision (speed.py), and `rimcl bench --quick`;
-# 6. both engines end to end (pipeline.py) and one case of 1e5 tracers x 1e4 rays.
+# 6. both engines end to end (pipeline.py, cases C1 and C3) and one case of 2e4 tracers x
+#    1e4 rays (SCALE_TRACERS). STEPS names the steps to run (default: all).
 # Each step has its own time limit (seconds, below), so one slow step cannot cost the rest;
-# in all they stay under 8 minutes.
+# in all they stay under 11 minutes.
 set -uo pipefail
 OUT=${OUT:-gpu-out}
 mkdir -p "$OUT/results"
@@ -23,8 +24,10 @@ RES="$OUT/results"
 LOG="$OUT/log.txt"
 export PYTHONUNBUFFERED=1
 export RIMCL_SHAPE_CACHE="$RES/kernel_shapes.json"
+STEPS=${STEPS:-devices tune verify tests agreement speed bench pipeline scale}
 step() {  # step NAME SECONDS COMMAND...: run with a limit, output to the log
     local name=$1 limit=$2; shift 2
+    case " $STEPS " in *" $name "*) ;; *) return ;; esac
     local start=$SECONDS
     echo "=== $name (limit ${limit} s)" | tee -a "$LOG"
     timeout "$limit" "$@" 2>&1 | tee -a "$LOG"
@@ -53,11 +56,13 @@ step tune 60 python3 -m rimcl bench --tune --device nvidia
 step verify 60 python3 -m rimcl verify --device nvidia
 device_tests=$(cd "$repo" && ls tests/test_{trace,kernels_build,device,camera,measure,cli_core,shapes}.py \
     tests/test_{interp,step,auto,method,speed,engine}*.py 2>/dev/null | sed "s|^|$repo/|")
-step tests 150 env RIMCL_TEST_DEVICE=nvidia python3 -m pytest -q -n 8 -p no:cacheprovider \
+step tests 150 env RIMCL_TEST_DEVICE=nvidia python3 -m pytest -q -n 8 -p no:cacheprovider -p no:benchmark \
     --rootdir "$repo" $device_tests
 step agreement 40 python3 "$repo/benchmarks/device_agreement.py" trace --device nvidia \
     --interp trilinear texture bspline3 -o "$RES/agreement_gpu.npz"
-step speed 50 python3 "$repo/benchmarks/speed.py" --device nvidia --json "$RES/speed.json"
+step speed 90 python3 "$repo/benchmarks/speed.py" --device nvidia --repeats 3 --json "$RES/speed.json"
 step bench 40 python3 -m rimcl bench --quick --device nvidia --out "$RES/bench"
-step pipeline 120 python3 "$repo/benchmarks/pipeline.py" --device nvidia --paper-tracers 500 \
-    --scale-run 100000 --json "$RES/pipeline.json"
+step pipeline 120 python3 "$repo/benchmarks/pipeline.py" --device nvidia --cases C1,C3 \
+    --tracers 100 --paper-tracers 40 --json "$RES/pipeline.json"
+step scale 100 python3 "$repo/benchmarks/pipeline.py" --device nvidia --cases "" \
+    --scale-run "${SCALE_TRACERS:-20000}" --json "$RES/scale.json"

@@ -148,7 +148,9 @@ def profile_device(per_case):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--device", default=None, help="OpenCL device spec (rimcl devices).")
-    parser.add_argument("--cases", default="C0,C1,C2,C3,C4", help="Cases of both scenes.")
+    parser.add_argument(
+        "--cases", default="C0,C1,C2,C3,C4", help="Cases of both scenes ('' for none)."
+    )
     parser.add_argument("--tracers", type=int, default=None, help="Default study tracers.")
     parser.add_argument("--paper-tracers", type=int, default=24)
     parser.add_argument("--profile", action="store_true", help="Profile the device host.")
@@ -164,11 +166,11 @@ def main():
         "default study": (load_scene(None), args.tracers),
         "paper density": (load_scene(None, PAPER_DENSITY), args.paper_tracers),
     }
-    for scene, tracers in scenes.values():
+    for scene, tracers in scenes.values() if cases else ():
         warm_up(scene, device, tracers)
     report = {"device": describe_device(device), "cases": cases, "scenes": {}}
     print(f"device: {report['device']['device']} ({report['device']['platform']})")
-    for name, (scene, tracers) in scenes.items():
+    for name, (scene, tracers) in scenes.items() if cases else ():
         rows = run_scene(
             {engine: configs(scene, cases, engine, device, tracers) for engine in ENGINES}
         )
