@@ -56,13 +56,13 @@ step tune 60 python3 -m rimcl bench --tune --device nvidia
 step verify 60 python3 -m rimcl verify --device nvidia
 device_tests=$(cd "$repo" && ls tests/test_{trace,kernels_build,device,camera,measure,cli_core,shapes}.py \
     tests/test_{interp,step,auto,method,speed,engine}*.py 2>/dev/null | sed "s|^|$repo/|")
-step tests 150 env RIMCL_TEST_DEVICE=nvidia python3 -m pytest -q -n 8 -p no:cacheprovider -p no:benchmark \
+step tests 140 env RIMCL_TEST_DEVICE=nvidia python3 -m pytest -q -n 8 -p no:cacheprovider -p no:benchmark \
     --rootdir "$repo" $device_tests
 step agreement 40 python3 "$repo/benchmarks/device_agreement.py" trace --device nvidia \
     --interp trilinear texture bspline3 -o "$RES/agreement_gpu.npz"
-step speed 90 python3 "$repo/benchmarks/speed.py" --device nvidia --repeats 3 --json "$RES/speed.json"
+step speed 60 python3 "$repo/benchmarks/speed.py" --device nvidia --repeats 3 --json "$RES/speed.json"
 step bench 40 python3 -m rimcl bench --quick --device nvidia --out "$RES/bench"
-step pipeline 120 python3 "$repo/benchmarks/pipeline.py" --device nvidia --cases C1,C3 \
+step pipeline 100 python3 "$repo/benchmarks/pipeline.py" --device nvidia --cases C1,C3 \
     --tracers 100 --paper-tracers 40 --json "$RES/pipeline.json"
-step scale 100 python3 "$repo/benchmarks/pipeline.py" --device nvidia --cases "" \
+step scale 80 python3 "$repo/benchmarks/pipeline.py" --device nvidia --cases "" \
     --scale-run "${SCALE_TRACERS:-20000}" --json "$RES/scale.json"
