@@ -144,9 +144,15 @@ class DeviceImager:
     group : int, optional
         Work-items per work-group (results do not depend on it); default
         :func:`image_group`.
+    tracers : int, optional
+        Tracers the run images in all, where known: image slots beyond it would only idle
+        and hold device memory (a GPU's 256 slots per multiprocessor are gigabytes of
+        scratch, and several processes or imagers share the device).
     """
 
-    def __init__(self, imaging, rays_per_tracer, max_tracers, device, queue, group=None):
+    def __init__(
+        self, imaging, rays_per_tracer, max_tracers, device, queue, group=None, tracers=None
+    ):
         import pyopencl as cl
 
         from rimcl.core.device import context_for, is_pocl
@@ -205,6 +211,8 @@ class DeviceImager:
         slot_bytes = area * 24 + self.rays * 24 + 16 * SPLAT_BLOCK * self.table_width
         budget = SCRATCH_SHARE * device.global_mem_size
         wanted = (CPU_SLOTS_PER_CORE if cpu else GPU_SLOTS_PER_UNIT) * device.max_compute_units
+        if tracers is not None:
+            wanted = min(wanted, -(-int(tracers) // self.group) * self.group)
         self.slots = max(1, min(int(wanted), int(budget // slot_bytes)))
         self.slots = max(self.group, self.slots // self.group * self.group)  # whole groups
         fill = min(

@@ -359,9 +359,13 @@ class DeviceEngine:
     device : pyopencl.Device
     batch : int
         Tracers per batch (raised on GPUs to fill the image slots: :class:`DeviceImager`).
+    tracers : int, optional
+        Tracers of the run (of its shard): no image slot beyond them is made.
     """
 
-    def __init__(self, camera, scene, imaging, device, batch, first_tracer=0, mie=None):
+    def __init__(
+        self, camera, scene, imaging, device, batch, first_tracer=0, mie=None, tracers=None
+    ):
         import pyopencl as cl
 
         from rimcl.core.device import context_for
@@ -371,7 +375,7 @@ class DeviceEngine:
         self.first_tracer = int(first_tracer)  # of a shard: the sampler counts rays run-wide
         self.rays = camera.rays_per_tracer
         self.queue = profiling_queue(device)
-        self.imager = DeviceImager(imaging, self.rays, batch, device, self.queue)
+        self.imager = DeviceImager(imaging, self.rays, batch, device, self.queue, tracers=tracers)
         self.batch = self.imager.max_tracers
         self.fan = FanStage(camera, scene, imaging.renderer, device, mie)
         self.mie_mode = self.fan.mie_mode

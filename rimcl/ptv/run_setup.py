@@ -207,7 +207,14 @@ def resolve_setup(source, source_name, case_index, config, streams, shard):
         from rimcl.imaging.engine import DeviceEngine
 
         setup.engine = DeviceEngine(
-            camera, scene, imaging, device, setup.batch, first_tracer=setup.first_tracer, mie=mie
+            camera,
+            scene,
+            imaging,
+            device,
+            setup.batch,
+            first_tracer=setup.first_tracer,
+            mie=mie,
+            tracers=stop - first,
         )
     calibration = None
     if integrator.interp == "auto":
