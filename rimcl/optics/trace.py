@@ -28,7 +28,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.fields.field import AnalyticField, Field
-from rimcl.optics.shapes import KernelShape, default_kernel_shape
+from rimcl.optics.shapes import CPU_TRACE_GROUP, KernelShape, default_kernel_shape
 
 logger = logging.getLogger(__name__)
 
@@ -649,6 +649,9 @@ def run_trace(
         kernel_shape=kernel_shape,
     )
     shape, max_steps = launch.shape, launch.max_steps
+    group = shape.group
+    if group is None and device.type & cl.device_type.CPU:
+        group = CPU_TRACE_GROUP  # one compiled kernel for every ray count (PoCL)
     context, queue = context_for(device), queue_for(device)
     kernel = get_kernel(build_program(context, "trace.cl", launch.defines), "trace_rays")
     field_buffer, counts, params = launch.field_buffer, launch.counts, launch.params
@@ -688,9 +691,9 @@ def run_trace(
             )
             work_items = -(-(stop - start) // shape.lanes)
             local = None
-            if shape.group is not None:  # surplus work-items return at once (n_rays)
-                work_items = -(-work_items // shape.group) * shape.group
-                local = (shape.group,)
+            if group is not None:  # surplus work-items return at once (n_rays)
+                work_items = -(-work_items // group) * group
+                local = (group,)
             launched = time.perf_counter()
             cl.enqueue_nd_range_kernel(queue, kernel, (work_items,), local)
             queue.finish()
@@ -712,7 +715,7 @@ def run_trace(
         "precision": precision,
         "max_steps": int(max_steps),
         "rays_per_work_item": shape.lanes,
-        "kernel_shape": shape.describe(),
+        "kernel_shape": {**shape.describe(), "group": group},
         "field": field.describe(),
         "sharma_steps": int(info[:, 3].sum(dtype=np.int64)),
         "kernel_seconds": kernel_seconds,
