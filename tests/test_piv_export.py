@@ -60,6 +60,10 @@ def test_every_format_holds_the_vectors_units_and_flags(tmp_path, dark_right_pai
     header = paths[".txt"].read_text().splitlines()[:3]
     assert header[0] == "# x\ty\tu\tv\tflags\tmask" and "m/s" in header[1]
     assert header[2].startswith("# orientation y-up")
+    record = json.loads(paths[".txt"].read_text().splitlines()[3].removeprefix("# rimcl_record "))
+    assert (
+        record["config"] == {"case": "t"} and record["dt_s"] == dt and "rimcl" in record["versions"]
+    )
     # OpenPIV's centres (window 0..15 at 8) and its transform_coordinates: y reversed, v up
     np.testing.assert_allclose(table[:, 0], (result.x.ravel() + 0.5) * pixel, rtol=1e-8)
     np.testing.assert_allclose(table[:, 1], (result.y[::-1] + 0.5).ravel() * pixel, rtol=1e-8)

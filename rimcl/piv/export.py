@@ -11,8 +11,9 @@ By the suffix of the path:
 - ``.txt``: the text file of ``openpiv.tools.save``: one row per vector in the grid's row
   order (top row of windows first), columns ``x y u v flags mask``, tab-separated, the
   header line ``# x<TAB>y<TAB>u<TAB>v<TAB>flags<TAB>mask`` first, then ``#`` lines with
-  rimcl's units and orientation; ``numpy.loadtxt(path)`` reads it as OpenPIV's
-  ``tools.display_vector_field`` does. Coordinates are OpenPIV's: a window of pixels
+  rimcl's units, the orientation and ``rimcl_record`` (JSON: configuration, versions,
+  scales); ``numpy.loadtxt(path)`` reads it as OpenPIV's ``tools.display_vector_field``
+  does. Coordinates are OpenPIV's: a window of pixels
   ``c … c + N − 1`` is centred at ``c + N/2`` (rimcl: ``c + (N − 1)/2``, so ``x = x_rimcl +
   1/2``). ``y-up`` (the default) is OpenPIV's ``tools.transform_coordinates``: the row
   coordinates reversed (the top row of windows carries the largest ``y``), ``v = −dy``
@@ -273,7 +274,7 @@ def _write_openpiv(tmp, result, flags, mask, scaled, record):
         "x\ty\tu\tv\tflags\tmask\n"
         f"rimcl PIV vectors in openpiv.tools.save's layout; {units}; flags 1: outlier "
         f"replaced; mask 1: no light\norientation {record['orientation']}: "
-        f"{record['coordinates']}"
+        f"{record['coordinates']}\nrimcl_record {to_json(record)}"
     )
     np.savetxt(tmp, table, fmt="%.8e", delimiter="\t", header=header, comments="# ")
 
