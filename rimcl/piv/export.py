@@ -168,7 +168,8 @@ def export_vectors(
         "versions": versions(),
         "pixel_size_m": pixel_size_m,
         "dt_s": dt_s,
-        "orientation": orientation,
+        # the .nc file keeps the vectors' image coordinates whatever the orientation asked
+        "orientation": "y-down" if suffix == ".nc" else orientation,
         "coordinates": _COORDINATES[suffix][orientation],
     }
     writer = {".nc": _write_netcdf, ".txt": _write_openpiv, ".mat": _write_pivlab}[suffix]
