@@ -98,6 +98,14 @@ def piv():
 )
 @click.option("--pixel-size-m", type=POSITIVE, default=None, help="Exports: metres per pixel.")
 @click.option("--dt-s", type=POSITIVE, default=None, help="Exports: seconds between A and B.")
+@click.option(
+    "--orientation",
+    type=click.Choice(["y-up", "y-down"]),
+    default="y-up",
+    show_default=True,
+    help="Exports .txt and .mat: y and v up the frame (OpenPIV after transform_coordinates, "
+    "PIVlab's y to the top) or down it (image coordinates).",
+)
 @overwrite_option
 @handle_errors
 def analyze(
@@ -113,6 +121,7 @@ def analyze(
     exports,
     pixel_size_m,
     dt_s,
+    orientation,
     overwrite,
 ):
     """Correlate two grey TIFF frames A and B into a displacement field (HDF5).
@@ -137,7 +146,15 @@ def analyze(
         outlier_threshold=outlier_threshold,
     )
     result = run_analyze(
-        image_a, image_b, output, settings, exports, pixel_size_m, dt_s, overwrite=overwrite
+        image_a,
+        image_b,
+        output,
+        settings,
+        exports,
+        pixel_size_m,
+        dt_s,
+        overwrite=overwrite,
+        orientation=orientation,
     )
     rows, cols = result.dx.shape
     invalid = int(np.count_nonzero(~result.valid))
@@ -462,12 +479,13 @@ def sequence(
     **options,
 ):
     """Time-resolved PIV from a scene (SCENE_FILE, default: the default scene): FRAMES
-    exposures piv.dt apart per seed, through the field, with the dense truth and the
-    particle tables.
+    exposures piv.dt apart per seed, through the field and through a uniform medium (the
+    reference), with the dense truth and the particle tables.
 
     The options and the scene are those of rimcl piv render. Writes
-    PREFIX_seed<s>_<k>.tif and PREFIX_seed<s>_truth.h5 per seed (truth in px per frame,
-    and in m/s with the scene's field.length_m and field.time_s).
+    PREFIX_seed<s>_<k>.tif (through the field), PREFIX_seed<s>_uniform_<k>.tif (the same
+    tracers and noise through the uniform medium) and PREFIX_seed<s>_truth.h5 per seed
+    (truth in px per frame, and in m/s with the scene's field.length_m and field.time_s).
 
     \b
     Example:
@@ -514,5 +532,6 @@ def sequence(
         click.echo(
             f"seed {result.seed}: {result.config['n_tracers']} tracers, {frames} frames; "
             f"dense truth rms dx {rms[0]:.3g}, dy {rms[1]:.3g} px per frame; wrote "
-            f"{paths[0].name} .. {paths[-1].name}"
+            f"{paths[0].name} .. {paths[frames - 1].name} (through the field), "
+            f"{paths[frames].name} .. {paths[-2].name} (uniform medium), {paths[-1].name}"
         )

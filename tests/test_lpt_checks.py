@@ -139,3 +139,19 @@ def test_a_dim_two_tracer_run_is_an_n_a_answer(tmp_path, lpt_flow):
 
 def _no_nan(constant):
     raise AssertionError(f"{constant} in lpt_stats.json")
+
+
+def test_calibration_lines_give_each_cameras_fit_residual():
+    from rimcl.lpt.checks import calibration_lines
+
+    case = {
+        "calibration_residual_px": {
+            "minus30": {"pinhole": 0.3104, "soloff": 0.00612},
+            "plus30": {"pinhole": 0.2981, "soloff": None},
+        }
+    }
+    assert calibration_lines(case) == [
+        "  calibration fit residual per camera (px): minus30 pinhole 0.31, Soloff 0.00612; "
+        "plus30 pinhole 0.298, Soloff n/a"
+    ]
+    assert calibration_lines({}) == []

@@ -101,6 +101,14 @@ def test_study_runs_lpt(tmp_path, lpt_flow):
     # Markdown, as the PTV summary: a heading and a table per case, not a terminal dump
     assert summary.startswith("# LPT study") and "```" not in summary
     assert "## C3" in summary and "| position refraction rms (px) |" in summary
+    # each case's calibration fit residual of each camera's models, as in stats.json
+    lines = [s for s in summary.splitlines() if "calibration fit residual per camera" in s]
+    assert len(lines) == 2
+    for line, case in zip(lines, cases.values(), strict=True):
+        assert len(case["calibration_residual_px"]) == 2
+        for name, fits in case["calibration_residual_px"].items():
+            assert f"{name} pinhole {fits['pinhole']:.3g}, Soloff {fits['soloff']:.3g}" in line
+            assert 0 < fits["soloff"] < fits["pinhole"]  # the window: a pinhole misses it
     # every headline number has its threshold band and verdict, in the file and the summary
     for case in cases.values():
         assert set(case["sensitivity"]["bands"]) == set(HEADLINES)

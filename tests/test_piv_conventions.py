@@ -107,17 +107,77 @@ def test_a_rotation_has_the_right_signs_in_frames_truth_and_vectors(rotation):
 def test_the_exports_keep_the_signs_and_positions(rotation, tmp_path):
     vectors, _, _ = rotation
     for suffix in (".nc", ".txt", ".mat"):
-        export_vectors(tmp_path / f"v{suffix}", vectors)
+        export_vectors(tmp_path / f"v{suffix}", vectors, orientation="y-down")
     with h5netcdf.File(tmp_path / "v.nc", "r") as nc:
         np.testing.assert_array_equal(nc.variables["y"][:], vectors.y[:, 0])
         np.testing.assert_array_equal(nc.variables["u"][:], vectors.dx)
         np.testing.assert_array_equal(nc.variables["v"][:], vectors.dy)
+    # image orientation: OpenPIV's image coordinates (window 0..31 centred at 16)
     table = np.loadtxt(tmp_path / "v.txt")
-    np.testing.assert_allclose(table[:, 1], vectors.y.ravel(), rtol=1e-8)
+    np.testing.assert_allclose(table[:, 1], vectors.y.ravel() + 0.5, rtol=1e-8)
     np.testing.assert_allclose(table[:, 3], vectors.dy.ravel(), rtol=1e-7)
     mat = loadmat(tmp_path / "v.mat")
     np.testing.assert_array_equal(mat["y"][0, 0], vectors.y + 1)
     np.testing.assert_array_equal(mat["v_original"][0, 0], vectors.dy)
+    assert mat["calv"][0, 0] == 1.0 and mat["orientation"][0] == "y-down"
+
+
+def test_openpiv_text_is_y_up_as_openpiv_writes_it(rotation, tmp_path):
+    """The default .txt is OpenPIV's physical frame: read as OpenPIV's loader reads it
+    (numpy.loadtxt, columns x y u v flags mask), the counter-clockwise rotation is
+    u = -θ (y - c), v = +θ (x - c) about the frame's centre c = 64 (OpenPIV's coordinates)."""
+    vectors, _, shape = rotation
+    path = export_vectors(tmp_path / "v.txt", vectors)
+    assert path.read_text().splitlines()[0] == "# x\ty\tu\tv\tflags\tmask"
+    a = np.loadtxt(path)
+    x, y, u, v, flags, mask = a[:, 0], a[:, 1], a[:, 2], a[:, 3], a[:, 4], a[:, 5]
+    rows, cols = vectors.dx.shape
+    assert a.shape == (rows * cols, 6)
+    centre = shape[1] / 2
+    # the top row of windows first, carrying the largest y: y up from the bottom edge
+    np.testing.assert_allclose(y.reshape(rows, cols), shape[0] - 0.5 - vectors.y, atol=1e-9)
+    np.testing.assert_allclose(x.reshape(rows, cols), vectors.x + 0.5, atol=1e-9)
+    inner = np.zeros((rows, cols), bool)
+    inner[1:-1, 1:-1] = True
+    inner = inner.ravel()
+    assert np.abs(u - (-THETA * (y - centre)))[inner].max() < 0.1
+    assert np.abs(v - THETA * (x - centre))[inner].max() < 0.1
+    assert np.all(flags == (~vectors.valid).ravel()) and np.all(mask == 0)
+
+
+def test_pivlab_mat_holds_calibrated_vectors_with_calu_and_calv(rotation, tmp_path):
+    """The .mat as PIVlab's MAT export: calibrated x, y (m) and u, v (m/s) with calxy,
+    calu, calv; y-up is PIVlab's "y increases to the top" (calv = -calu)."""
+    vectors, _, shape = rotation
+    pixel, dt = 2e-5, 1e-3
+    export_vectors(tmp_path / "up.mat", vectors, pixel_size_m=pixel, dt_s=dt)
+    export_vectors(
+        tmp_path / "down.mat", vectors, pixel_size_m=pixel, dt_s=dt, orientation="y-down"
+    )
+    up, down = loadmat(tmp_path / "up.mat"), loadmat(tmp_path / "down.mat")
+    speed = pixel / dt
+    for mat in (up, down):
+        assert mat["calxy"][0, 0] == pytest.approx(pixel)
+        assert mat["calu"][0, 0] == pytest.approx(speed)
+        assert mat["units"][0] == "[m] respectively [m/s]"
+        np.testing.assert_allclose(mat["x"][0, 0], pixel * (vectors.x + 1))
+        np.testing.assert_allclose(mat["u_original"][0, 0], speed * vectors.dx)
+        assert mat["u_smoothed"][0, 0].size == 0
+    assert up["calv"][0, 0] == pytest.approx(-speed) and up["orientation"][0] == "y-up"
+    assert down["calv"][0, 0] == pytest.approx(speed)
+    np.testing.assert_allclose(down["y"][0, 0], pixel * (vectors.y + 1))
+    np.testing.assert_allclose(down["v_original"][0, 0], speed * vectors.dy)
+    # y-up: PIVlab's calibrate.xy, y = calxy (rows - y_px) with 1-based y_px
+    y_up = up["y"][0, 0]
+    np.testing.assert_allclose(y_up, pixel * (shape[0] - 1 - vectors.y))
+    # the rotation, counter-clockwise with y up, about the centre of the pixel centres
+    centre = pixel * (shape[0] - 1) / 2
+    x_m = up["x"][0, 0] - pixel
+    inner = (slice(1, -1), slice(1, -1))
+    tolerance = 0.1 * speed  # 0.1 px per pair
+    assert np.abs(up["u_original"][0, 0] + THETA * (y_up - centre) / dt)[inner].max() < tolerance
+    assert np.abs(up["v_original"][0, 0] - THETA * (x_m - centre) / dt)[inner].max() < tolerance
+    assert any("rimcl" in str(line[0]) for line in up["information"].ravel())
 
 
 def test_openpiv_reads_the_pairs_with_the_right_signs(rotation, device):
@@ -145,6 +205,49 @@ def test_openpiv_reads_the_pairs_with_the_right_signs(rotation, device):
     # after its transform_coordinates, y points up and v = +x3 motion
     _, _, _, v_up = tools.transform_coordinates(x, y, u, v)
     assert np.median(v_up) == pytest.approx(-2.0, abs=0.1)
+
+
+def test_openpiv_saves_the_file_rimcl_writes(device, tmp_path):
+    """OpenPIV's standard pipeline (extended_search_area_piv, get_coordinates,
+    scaling.uniform, transform_coordinates, tools.save) on a rimcl pair writes, column by
+    column, the file rimcl's export writes for its own vectors of the pair (skipped where
+    OpenPIV, GPL, is not installed)."""
+    pyprocess = pytest.importorskip("openpiv.pyprocess")
+    tools = pytest.importorskip("openpiv.tools")
+    scaling = pytest.importorskip("openpiv.scaling")
+    start = seed_particles(SCENE, IMAGING, np.random.default_rng(7))
+    moved = np.column_stack([start[:, 0], start[:, 1:] + np.array([1.0, -2.0]) / 128])
+    made = image_frames(
+        (_medium(), _medium()),
+        np.stack([start, moved]),
+        SCENE,
+        _camera(),
+        IMAGING,
+        {"device": device},
+    )
+    pixel, dt = 1e-5, 1e-3
+    a, b = (image.astype(np.int32) for image in made.images)
+    u, v, _ = pyprocess.extended_search_area_piv(a, b, 32, 16, dt=dt, search_area_size=32)
+    x, y = pyprocess.get_coordinates(a.shape, 32, 16)
+    x, y, u, v = scaling.uniform(x, y, u, v, scaling_factor=1 / pixel)
+    x, y, u, v = tools.transform_coordinates(x, y, u, v)
+    tools.save(tmp_path / "openpiv.txt", x, y, u, v)
+    ours = analyze_pair(*made.images, PivSettings(window=32, overlap=0.5, passes=3))
+    export_vectors(tmp_path / "rimcl.txt", ours, pixel_size_m=pixel, dt_s=dt)
+    theirs, mine = np.loadtxt(tmp_path / "openpiv.txt"), np.loadtxt(tmp_path / "rimcl.txt")
+    first = [(tmp_path / n).read_text().splitlines()[0] for n in ("openpiv.txt", "rimcl.txt")]
+    assert first[0] == first[1]
+    assert theirs.shape == mine.shape == (49, 6)
+    # x, y: the same window centres (OpenPIV prints 5 digits)
+    np.testing.assert_allclose(mine[:, :2], theirs[:, :2], rtol=1e-4)
+    # u, v: the same signs and values; OpenPIV's one pass without deformation loses pairs
+    # at the window edges (up to 0.22 px off, median 0.04 px), rimcl's three passes do not
+    speed = pixel / dt
+    difference = np.abs(mine[:, 2:4] - theirs[:, 2:4]) / speed
+    assert difference.max() < 0.3 and np.median(difference) < 0.1
+    # moved +1 px along x2 and 2 px down x3: u = +1 px, v = -2 px (v up)
+    assert np.median(mine[:, 2:4], axis=0) == pytest.approx([speed, -2 * speed], rel=0.01)
+    np.testing.assert_array_equal(mine[:, 4:], theirs[:, 4:])  # no flags, no mask
 
 
 def _wavy_pair():

@@ -57,19 +57,28 @@ def test_every_format_holds_the_vectors_units_and_flags(tmp_path, dark_right_pai
     assert np.median(result.dy[lit]) == pytest.approx(-0.4, abs=0.02)
     table = np.loadtxt(paths[".txt"])
     assert table.shape == (result.dx.size, 6)
-    header = paths[".txt"].read_text().splitlines()[:2]
-    assert "m/s" in header[0] and header[1] == "# x\ty\tu\tv\tflags\tmask"
-    np.testing.assert_allclose(table[:, 0], result.x.ravel() * pixel, rtol=1e-8)
-    np.testing.assert_allclose(table[:, 3], result.dy.ravel() * pixel / dt, rtol=1e-8)
+    header = paths[".txt"].read_text().splitlines()[:3]
+    assert header[0] == "# x\ty\tu\tv\tflags\tmask" and "m/s" in header[1]
+    assert header[2].startswith("# orientation y-up")
+    record = json.loads(paths[".txt"].read_text().splitlines()[3].removeprefix("# rimcl_record "))
+    assert (
+        record["config"] == {"case": "t"} and record["dt_s"] == dt and "rimcl" in record["versions"]
+    )
+    # OpenPIV's centres (window 0..15 at 8) and its transform_coordinates: y reversed, v up
+    np.testing.assert_allclose(table[:, 0], (result.x.ravel() + 0.5) * pixel, rtol=1e-8)
+    np.testing.assert_allclose(table[:, 1], (result.y[::-1] + 0.5).ravel() * pixel, rtol=1e-8)
+    np.testing.assert_allclose(table[:, 3], -result.dy.ravel() * pixel / dt, rtol=1e-8)
     np.testing.assert_array_equal(table[:, 4], (~result.valid).ravel())
     np.testing.assert_array_equal(table[:, 5], mask.ravel())
     mat = loadmat(paths[".mat"])
-    np.testing.assert_array_equal(mat["x"][0, 0], result.x + 1)  # MATLAB's 1-based pixels
-    np.testing.assert_array_equal(mat["u_original"][0, 0], result.dx)
+    # PIVlab's calibrated values: x = calxy x_px (MATLAB's 1-based pixels), u = calu dx
+    np.testing.assert_allclose(mat["x"][0, 0], (result.x + 1) * pixel)
+    np.testing.assert_allclose(mat["u_original"][0, 0], result.dx * pixel / dt)
     kinds = mat["typevector_original"][0, 0]
     assert kinds[0, 0] == 2 and np.all(kinds[mask == 1] == 0) and kinds[1, 1] == 1
     assert np.all(np.isnan(mat["u_filtered"][0, 0][mask == 1]))
     assert mat["calu"][0, 0] == pytest.approx(pixel / dt)
+    assert mat["calv"][0, 0] == pytest.approx(-pixel / dt)  # y-up
     assert json.loads(mat["rimcl_config"][0])["config"] == {"case": "t"}
 
 
@@ -95,5 +104,24 @@ def test_cli_exports_and_refuses_an_unknown_suffix(tmp_path, dark_right_pair):
     )
     assert ok.exit_code == 0, ok.output
     assert np.loadtxt(tmp_path / "v.txt").shape[1] == 6
+    down = runner.invoke(
+        cli,
+        [
+            *base,
+            "-o",
+            str(tmp_path / "d.h5"),
+            "--window",
+            "16",
+            "--export",
+            str(tmp_path / "d.txt"),
+            "--orientation",
+            "y-down",
+        ],
+    )
+    assert down.exit_code == 0, down.output
+    up, image = np.loadtxt(tmp_path / "v.txt"), np.loadtxt(tmp_path / "d.txt")
+    np.testing.assert_allclose(up[:, 3], -image[:, 3])
+    bad_way = runner.invoke(cli, [*base, "-o", str(tmp_path / "e.h5"), "--orientation", "up"])
+    assert bad_way.exit_code != 0 and "'up' is not one of" in bad_way.output
     half = runner.invoke(cli, [*base, "-o", str(tmp_path / "w.h5"), "--pixel-size-m", "1e-5"])
     assert half.exit_code != 0 and "give both" in half.output

@@ -40,6 +40,16 @@ def test_sequence_of_a_uniform_flow_knows_its_truth(box, device, tmp_path):
     )
     np.testing.assert_allclose(np.diff(first.pixels, axis=0)[..., 0], 0.015 / pixel, rtol=1e-7)
     assert first.frames.images.shape == (3, 96, 96)
+    # the reference sequence: the same tracers through the uniform medium, imaged where
+    # they are (straight rays, to rounding); through the field C2 bends them off by ~1e-3
+    assert first.uniform.images.shape == (3, 96, 96)
+    seen = np.isfinite(first.uniform.optics[..., 0])
+    assert seen.mean() > 0.9
+    np.testing.assert_allclose(
+        first.uniform.optics[seen], first.positions[..., 1:][seen], atol=1e-12
+    )
+    assert np.nanmax(np.abs(first.frames.optics - first.positions[..., 1:])) > 1e-4
+    assert not np.array_equal(first.frames.images, first.uniform.images)
     # independent realisations: other tracers, other frames
     count = first.positions.shape[1]
     assert second.positions.shape[1] == count
@@ -51,14 +61,21 @@ def test_sequence_of_a_uniform_flow_knows_its_truth(box, device, tmp_path):
         "seq_seed1_000.tif",
         "seq_seed1_001.tif",
         "seq_seed1_002.tif",
+        "seq_seed1_uniform_000.tif",
+        "seq_seed1_uniform_001.tif",
+        "seq_seed1_uniform_002.tif",
         "seq_seed1_truth.h5",
     ]
     np.testing.assert_array_equal(tifffile.imread(paths[1]), first.frames.images[1])
+    np.testing.assert_array_equal(tifffile.imread(paths[4]), first.uniform.images[1])
     with h5py.File(paths[-1]) as h5:
         assert h5.attrs["rimcl_schema"] == "piv_sequence_truth"
         np.testing.assert_array_equal(h5["truth/dx"][...], first.truth_px[..., 0])
         assert h5["particles/position"].shape == (count, 3, 3)  # (id, frame, axis)
         assert "m/s" in h5.attrs["units"]
+        np.testing.assert_array_equal(
+            h5["particles/image_point_uniform"][...], np.swapaxes(first.uniform.optics, 0, 1)
+        )
     import xarray as xr
 
     particles = xr.open_dataset(paths[-1], group="particles", engine="h5netcdf")
@@ -92,6 +109,7 @@ def test_cli_writes_one_set_of_files_per_seed(box, tmp_path):
     assert ok.exit_code == 0, ok.output
     for seed in (0, 1):
         assert (tmp_path / f"s_seed{seed}_001.tif").exists()
+        assert (tmp_path / f"s_seed{seed}_uniform_001.tif").exists()
         assert (tmp_path / f"s_seed{seed}_truth.h5").exists()
     with h5py.File(tmp_path / "s_seed0_truth.h5") as h5:
         # no scales, no m/s: the units text names only what is written

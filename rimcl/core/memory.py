@@ -314,7 +314,8 @@ def check_sequence_memory(shape, frames, seeds, frame_shape, physical=False):
 
     A sequence holds every frame's field (:data:`SEQUENCE_FIELD_BYTES_PER_NODE`), the dense
     truth of every step (twice with the m/s copy) and, until they are written, every
-    seed's frames (:data:`FRAME_IMAGE_BYTES_PER_PIXEL`).
+    seed's frames through the field and through the uniform medium
+    (:data:`FRAME_IMAGE_BYTES_PER_PIXEL` each).
 
     Parameters
     ----------
@@ -330,7 +331,7 @@ def check_sequence_memory(shape, frames, seeds, frame_shape, physical=False):
     nodes, pixels = _nodes(shape), int(frame_shape[0]) * int(frame_shape[1])
     needed = frames * nodes * SEQUENCE_FIELD_BYTES_PER_NODE + nodes * FIELD_LOAD_BYTES_PER_NODE
     needed += (frames - 1) * pixels * SEQUENCE_TRUTH_BYTES_PER_PIXEL * (2 if physical else 1)
-    needed += seeds * frames * pixels * FRAME_IMAGE_BYTES_PER_PIXEL
+    needed += 2 * seeds * frames * pixels * FRAME_IMAGE_BYTES_PER_PIXEL
     check_host(
         needed,
         f"{seeds} sequence(s) of {frames} frames of {frame_shape[0]} x {frame_shape[1]} px "

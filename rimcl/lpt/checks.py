@@ -175,3 +175,33 @@ def reason_lines(case):
         if named:
             lines.append(f"  {group} {'/'.join(named)}: {notes[named[0]]}")
     return lines
+
+
+def calibration_lines(case):
+    """The summary's line of each camera's calibration fit residual (px): the rms distance,
+    over the calibration target, between each fitted model's projection (the pinhole DLT and
+    the Soloff polynomial of the OpenLPT POLYNOMIAL file) and the target's images.
+
+    Parameters
+    ----------
+    case : dict
+        One case of ``lpt_stats.json`` (``calibration_residual_px``: per camera ``{model:
+        px}``).
+
+    Returns
+    -------
+    list of str
+        One line (none without residuals).
+    """
+    residuals = case.get("calibration_residual_px") or {}
+    labels = {"pinhole": "pinhole", "soloff": "Soloff"}
+
+    def cell(value):
+        return "n/a" if value is None else f"{value:.3g}"
+
+    parts = [
+        f"{camera} "
+        + ", ".join(f"{labels[k]} {cell(fits[k])}" for k in ("pinhole", "soloff") if k in fits)
+        for camera, fits in residuals.items()
+    ]
+    return ["  calibration fit residual per camera (px): " + "; ".join(parts)] if parts else []

@@ -740,6 +740,7 @@ def summary_lines(document):
             f"residual up to {residual:.3g} px; {case['tracers_kept']}/{case['tracers']} tracers"
         )
         lines.extend(checks.reason_lines(case))
+        lines.extend(checks.calibration_lines(case))
         pos = case["position"]
         lines.append(
             "  position refraction rms (px): "

@@ -7,19 +7,37 @@ By the suffix of the path:
   variables ``u``, ``v`` (displacement, px per frame pair), ``flags`` (1: an outlier
   replaced), ``mask`` (1: no light in the window), ``peak_ratio``; with a pixel size and a
   time step also ``x_m``, ``y_m`` (m) and ``u_ms``, ``v_ms`` (m/s); ``units`` on every
-  variable, the configuration as a global attribute;
-- ``.txt``: OpenPIV's text layout (``openpiv.tools.save``): one row per vector, columns
-  ``x y u v flags mask``, tab-separated, a ``#`` header naming columns and units (px and
-  px per pair, or m and m/s with a pixel size and a time step);
-- ``.mat``: a PIVlab-style MATLAB file (``scipy.io.savemat``): cell arrays of one frame pair
-  ``x``, ``y`` (MATLAB's 1-based pixel coordinates: rimcl's pixel ``i`` is ``i + 1``),
+  variable, the configuration as a global attribute. Always rimcl's image orientation;
+- ``.txt``: the text file of ``openpiv.tools.save``: one row per vector in the grid's row
+  order (top row of windows first), columns ``x y u v flags mask``, tab-separated, the
+  header line ``# x<TAB>y<TAB>u<TAB>v<TAB>flags<TAB>mask`` first, then ``#`` lines with
+  rimcl's units, the orientation and ``rimcl_record`` (JSON: configuration, versions,
+  scales); ``numpy.loadtxt(path)`` reads it as OpenPIV's ``tools.display_vector_field``
+  does. Coordinates are OpenPIV's: a window of pixels
+  ``c … c + N − 1`` is centred at ``c + N/2`` (rimcl: ``c + (N − 1)/2``, so ``x = x_rimcl +
+  1/2``). ``y-up`` (the default) is OpenPIV's ``tools.transform_coordinates``: the row
+  coordinates reversed (the top row of windows carries the largest ``y``), ``v = −dy``
+  (up the frame); ``y-down`` keeps OpenPIV's image coordinates (``y``, ``v`` down the
+  frame). px and px per pair, or with a pixel size and a time step m and m/s (OpenPIV's
+  ``scaling.uniform`` with ``u`` in px per ``dt``); values printed ``%.8e`` (OpenPIV's
+  default ``%.4e`` keeps 5 digits);
+- ``.mat``: what PIVlab's *Export → MAT file* writes (``+export/mat_file_save.m``, all frames
+  of a session: cells of one frame pair), by ``scipy.io.savemat``: ``x``, ``y``,
   ``u_original``, ``v_original``, ``typevector_original`` (1 a vector, 2 replaced, 0
-  masked), ``u_filtered``, ``v_filtered``, ``typevector_filtered`` (the same, masked
-  vectors NaN), ``units``, ``calxy`` (m per px, 1 without a scale), ``calu`` (m/s per px
-  per pair), and ``rimcl_config`` (JSON).
+  masked), ``u_filtered``, ``v_filtered`` (masked vectors NaN), ``typevector_filtered``,
+  ``u_smoothed``, ``v_smoothed`` (empty: rimcl does not smooth), ``calxy`` (m per px, 1
+  without a scale), ``calu``, ``calv`` (m/s per px per pair, or ±1 without scales),
+  ``units`` (PIVlab's ``'[m] respectively [m/s]'`` or ``'[px] respectively [px/frame]'``),
+  ``information``, and rimcl's ``orientation`` and ``rimcl_config`` (JSON). As in PIVlab
+  the values are calibrated: ``u_original = calu × dx``, ``v_original = calv × dy``,
+  ``x = calxy × x_px``, from MATLAB's 1-based pixel coordinates ``x_px = x_rimcl + 1``;
+  ``y-down`` is PIVlab's default axes (``y = calxy × (y_rimcl + 1)``, ``calv = calu``),
+  ``y-up`` its "y increases to the top" (``y = calxy × (rows − y_rimcl − 1)``, ``calv =
+  −calu``).
 
-Coordinates are those of the vectors (:mod:`rimcl.piv.analysis`): ``x`` along image
-columns, ``y`` along image rows, ``u`` and ``v`` the displacement along them.
+Coordinates of :class:`rimcl.piv.analysis.PivResult`: ``x`` along image columns, ``y`` along
+image rows (row 0 at the top, pixel centres at integers), ``dx``, ``dy`` the displacement
+along them.
 """
 
 import json
@@ -33,6 +51,16 @@ from rimcl.core.provenance import to_json, versions
 from rimcl.piv.analysis import WindowGrid
 
 FORMATS = {".nc": "netCDF-4 (xarray)", ".txt": "OpenPIV text", ".mat": "PIVlab .mat"}
+#: Orientations of the ``.txt`` and ``.mat`` exports (module docstring).
+ORIENTATIONS = ("y-up", "y-down")
+#: PIVlab's ``information`` of its MAT export (``+export/mat_file_save.m``).
+PIVLAB_INFORMATION = (
+    "The first dimension of the variables is the frame number.",
+    "Typevector is 0 for masked vector, 1 for regular vector, 2 for filtered vector",
+    "u_original and v_original are the unmodified velocities from the cross-correlation.",
+    "u_filtered and v_filtered is the above incl. your data validation selection.",
+    "u_smoothed and v_smoothed is the above incl. your smoothing selection.",
+)
 #: A window is without light when its brightest pixel, in both frames, lies within this
 #: share of the frame's range (1st percentile to 99.9th) above the 1st percentile.
 DARK_SHARE = 0.05
@@ -86,7 +114,14 @@ def _scaled(result, pixel_size_m, dt_s):
 
 
 def export_vectors(
-    path, result, mask=None, pixel_size_m=None, dt_s=None, config=None, overwrite=True
+    path,
+    result,
+    mask=None,
+    pixel_size_m=None,
+    dt_s=None,
+    config=None,
+    overwrite=True,
+    orientation="y-up",
 ):
     """Write the vectors of ``result`` in the format of the path's suffix (module docstring).
 
@@ -104,12 +139,18 @@ def export_vectors(
     config : dict, optional
         Recorded in the file.
     overwrite : bool
+    orientation : {"y-up", "y-down"}
+        Of the ``.txt`` and ``.mat`` files: ``y`` and ``v`` up the frame (OpenPIV after
+        ``tools.transform_coordinates``; PIVlab's "y increases to the top") or down it
+        (image coordinates). The ``.nc`` file is always in image coordinates.
 
     Returns
     -------
     Path
     """
     path = Path(path)
+    if orientation not in ORIENTATIONS:
+        raise RimclError(f"unknown orientation {orientation!r}: give " + " or ".join(ORIENTATIONS))
     suffix = path.suffix.lower()
     if suffix not in FORMATS:
         raise RimclError(
@@ -127,13 +168,36 @@ def export_vectors(
         "versions": versions(),
         "pixel_size_m": pixel_size_m,
         "dt_s": dt_s,
-        "coordinates": "x along image columns, y along image rows (pixels); u, v the "
-        "displacement of frame B relative to A along x and y",
+        # the .nc file keeps the vectors' image coordinates whatever the orientation asked
+        "orientation": "y-down" if suffix == ".nc" else orientation,
+        "coordinates": _COORDINATES[suffix][orientation],
     }
     writer = {".nc": _write_netcdf, ".txt": _write_openpiv, ".mat": _write_pivlab}[suffix]
     with atomic_path(path, overwrite=overwrite) as tmp:
         writer(tmp, result, flags, mask, scaled, record)
     return path
+
+
+_IMAGE = (
+    "x along image columns, y along image rows (pixels, row 0 at the top); u, v the "
+    "displacement of frame B relative to A along x and y"
+)
+_COORDINATES = {
+    ".nc": {"y-up": _IMAGE, "y-down": _IMAGE},
+    ".txt": {
+        "y-up": "OpenPIV's physical coordinates (tools.transform_coordinates): x to the right, "
+        "y up (the window rows' coordinates reversed), v up the frame; a window of pixels "
+        "c..c+N-1 centred at c+N/2",
+        "y-down": "OpenPIV's image coordinates: x to the right, y and v down the frame from "
+        "the top-left corner; a window of pixels c..c+N-1 centred at c+N/2",
+    },
+    ".mat": {
+        "y-up": "PIVlab's axes with y increasing to the top: y = calxy*(rows - y_px), "
+        "calv = -calu (v up the frame); x_px, y_px MATLAB's 1-based pixel coordinates",
+        "y-down": "PIVlab's default axes: x to the right, y down the frame from the top-left "
+        "pixel, calv = calu (v down); x_px, y_px MATLAB's 1-based pixel coordinates",
+    },
+}
 
 
 def _write_netcdf(tmp, result, flags, mask, scaled, record):
@@ -172,19 +236,96 @@ def _write_netcdf(tmp, result, flags, mask, scaled, record):
             h5[name].dims[1].attach_scale(h5["x"])
 
 
+def openpiv_columns(result, pixel_size_m=None, dt_s=None, orientation="y-up"):
+    """The columns ``x, y, u, v`` of OpenPIV's text file for ``result`` (module docstring).
+
+    Parameters
+    ----------
+    result : rimcl.piv.analysis.PivResult
+    pixel_size_m, dt_s : float, optional
+        With both: m and m/s, else px and px per frame pair.
+    orientation : {"y-up", "y-down"}
+
+    Returns
+    -------
+    tuple of 4 ndarray, float64, shape of the vector grid
+        ``x, y`` (px or m), ``u, v`` (px per pair or m/s), in OpenPIV's conventions.
+    """
+    x = np.asarray(result.x, np.float64) + 0.5
+    y = np.asarray(result.y, np.float64) + 0.5
+    u = np.asarray(result.dx, np.float64)
+    v = np.asarray(result.dy, np.float64)
+    if orientation == "y-up":  # openpiv.tools.transform_coordinates
+        y, v = y[::-1, :], -v
+    if pixel_size_m is not None and dt_s is not None:  # openpiv.scaling.uniform
+        _scaled(result, pixel_size_m, dt_s)  # checks the scales
+        speed = pixel_size_m / dt_s
+        x, y, u, v = x * pixel_size_m, y * pixel_size_m, u * speed, v * speed
+    return x, y, u, v
+
+
 def _write_openpiv(tmp, result, flags, mask, scaled, record):
+    columns = openpiv_columns(result, record["pixel_size_m"], record["dt_s"], record["orientation"])
     if scaled is None:
-        columns = [result.x, result.y, result.dx, result.dy]
         units = "x, y in px; u, v in px per frame pair"
     else:
-        columns = [scaled["x_m"], scaled["y_m"], scaled["u_ms"], scaled["v_ms"]]
         units = "x, y in m; u, v in m/s"
     table = np.column_stack([c.ravel() for c in columns] + [flags.ravel(), mask.ravel()])
     header = (
-        f"rimcl PIV vectors, OpenPIV layout ({units}; flags 1: outlier replaced; mask 1: "
-        f"no light); {record['coordinates']}\nx\ty\tu\tv\tflags\tmask"
+        "x\ty\tu\tv\tflags\tmask\n"
+        f"rimcl PIV vectors in openpiv.tools.save's layout; {units}; flags 1: outlier "
+        f"replaced; mask 1: no light\norientation {record['orientation']}: "
+        f"{record['coordinates']}\nrimcl_record {to_json(record)}"
     )
     np.savetxt(tmp, table, fmt="%.8e", delimiter="\t", header=header, comments="# ")
+
+
+def pivlab_variables(result, mask=None, pixel_size_m=None, dt_s=None, orientation="y-up"):
+    """The variables of PIVlab's MAT export for ``result`` (module docstring).
+
+    Parameters
+    ----------
+    result : rimcl.piv.analysis.PivResult
+    mask : ndarray, shape of the grid, optional
+        1 where a window has no light.
+    pixel_size_m, dt_s : float, optional
+        With both: calibrated (m, m/s), else px and px per frame pair.
+    orientation : {"y-up", "y-down"}
+
+    Returns
+    -------
+    dict
+        ``x, y, u_original, v_original, typevector_original, u_filtered, v_filtered,
+        typevector_filtered`` (ndarray, float64, shape of the grid), ``calxy, calu, calv``
+        (float) and ``units`` (str), PIVlab's names and meanings.
+    """
+    mask = np.zeros(result.dx.shape, np.uint8) if mask is None else np.asarray(mask, np.uint8)
+    scaled = _scaled(result, pixel_size_m, dt_s)
+    calxy = 1.0 if scaled is None else float(pixel_size_m)
+    calu = 1.0 if scaled is None else float(pixel_size_m) / float(dt_s)
+    x_px = np.asarray(result.x, np.float64) + 1.0  # MATLAB's 1-based pixels
+    y_px = np.asarray(result.y, np.float64) + 1.0
+    if orientation == "y-up":  # PIVlab's calibrate.xy with y increasing to the top
+        y_px, calv = result.image_shape[0] - y_px, -calu
+    else:
+        calv = calu
+    typevector = np.where(np.asarray(result.valid, bool), 1.0, 2.0)
+    typevector[mask == 1] = 0.0
+    u, v = calu * np.asarray(result.dx, np.float64), calv * np.asarray(result.dy, np.float64)
+    return {
+        "x": calxy * x_px,
+        "y": calxy * y_px,
+        "u_original": u,
+        "v_original": v,
+        "typevector_original": typevector,
+        "u_filtered": np.where(mask == 1, np.nan, u),
+        "v_filtered": np.where(mask == 1, np.nan, v),
+        "typevector_filtered": typevector,
+        "calxy": calxy,
+        "calu": calu,
+        "calv": calv,
+        "units": "[px] respectively [px/frame]" if scaled is None else "[m] respectively [m/s]",
+    }
 
 
 def _write_pivlab(tmp, result, flags, mask, scaled, record):
@@ -195,37 +336,36 @@ def _write_pivlab(tmp, result, flags, mask, scaled, record):
         holder[0, 0] = np.asarray(values, dtype=np.float64)
         return holder
 
-    typevector = np.where(flags == 1, 2.0, 1.0)
-    typevector[mask == 1] = 0.0
-    filtered_u = np.where(mask == 1, np.nan, result.dx)
-    filtered_v = np.where(mask == 1, np.nan, result.dy)
-    calxy = 1.0 if scaled is None else float(record["pixel_size_m"])
-    calu = 1.0 if scaled is None else float(record["pixel_size_m"]) / float(record["dt_s"])
+    variables = pivlab_variables(
+        result, mask, record["pixel_size_m"], record["dt_s"], record["orientation"]
+    )
+    contents = {
+        name: cell(value) if isinstance(value, np.ndarray) else value
+        for name, value in variables.items()
+    }
+    contents["u_smoothed"] = cell(np.zeros((0, 0)))
+    contents["v_smoothed"] = cell(np.zeros((0, 0)))
+    information = np.empty((len(PIVLAB_INFORMATION) + 1, 1), dtype=object)
+    for row, line in enumerate(PIVLAB_INFORMATION):
+        information[row, 0] = line
+    information[-1, 0] = "rimcl: " + record["coordinates"]
+    contents["information"] = information
+    contents["orientation"] = record["orientation"]
+    contents["rimcl_config"] = json.dumps(json.loads(to_json(record)))
     with open(tmp, "wb") as stream:
-        savemat(
-            stream,
-            {
-                "x": cell(result.x + 1.0),
-                "y": cell(result.y + 1.0),
-                "u_original": cell(result.dx),
-                "v_original": cell(result.dy),
-                "typevector_original": cell(typevector),
-                "u_filtered": cell(filtered_u),
-                "v_filtered": cell(filtered_v),
-                "typevector_filtered": cell(typevector),
-                "calxy": calxy,
-                "calu": calu,
-                "units": "x, y in px (1-based, MATLAB); u, v in px per frame pair; "
-                "calxy m per px and calu m/s per px per pair (1: no scale given)",
-                "rimcl_config": json.dumps(json.loads(to_json(record))),
-            },
-            format="5",
-            do_compression=True,
-        )
+        savemat(stream, contents, format="5", do_compression=True)
 
 
 def run_analyze(
-    path_a, path_b, output, settings=None, exports=(), pixel_size_m=None, dt_s=None, overwrite=False
+    path_a,
+    path_b,
+    output,
+    settings=None,
+    exports=(),
+    pixel_size_m=None,
+    dt_s=None,
+    overwrite=False,
+    orientation="y-up",
 ):
     """What ``rimcl piv analyze`` does: :func:`rimcl.piv.analysis.analyze_files` (read,
     check, correlate, write the vectors), then each export (:func:`export_vectors`, with
@@ -242,6 +382,8 @@ def run_analyze(
     pixel_size_m, dt_s : float, optional
         Scales of the exports' velocities (both or neither).
     overwrite : bool
+    orientation : {"y-up", "y-down"}
+        Of the ``.txt`` and ``.mat`` exports (:func:`export_vectors`).
 
     Returns
     -------
@@ -251,6 +393,8 @@ def run_analyze(
 
     if (pixel_size_m is None) != (dt_s is None):
         raise RimclError("give both the pixel size (m) and the time between frames (s), or none")
+    if orientation not in ORIENTATIONS:
+        raise RimclError(f"unknown orientation {orientation!r}: give " + " or ".join(ORIENTATIONS))
     for path in exports:
         check_output(path, overwrite)
         if Path(path).suffix.lower() not in FORMATS:
@@ -265,5 +409,5 @@ def run_analyze(
         inputs = {"image_a": str(Path(path_a).resolve()), "image_b": str(Path(path_b).resolve())}
         config = {"inputs": inputs, "piv": result.settings.describe()}
         for path in exports:
-            export_vectors(path, result, mask, pixel_size_m, dt_s, config, overwrite)
+            export_vectors(path, result, mask, pixel_size_m, dt_s, config, overwrite, orientation)
     return result

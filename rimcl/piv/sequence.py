@@ -15,7 +15,13 @@ time scale (seconds per field time unit) also in m/s. Pixels as every PIV output
 (:func:`rimcl.piv.imaging_config.frame_pixels`): row 0 at the top (highest ``x3``), pixel
 ``(row i, column j)`` centred at ``(x, y) = (j, i)``, ``dy > 0`` down the frame.
 
-Files (:func:`write_piv_sequence`): per seed ``PREFIX_seed<s>_<k>.tif`` (``k`` from 000) and
+**Reference sequence**: the same tracers at the same instants imaged through a uniform medium
+(the fluid's index, :func:`rimcl.ptv.field_source.uniform_like`) with the same sensor noise
+draws (common random numbers, as a PIV pair's reference): what the camera would record without
+refraction, so that the difference of the two sequences' vectors is refraction's alone.
+
+Files (:func:`write_piv_sequence`): per seed ``PREFIX_seed<s>_<k>.tif`` (``k`` from 000,
+through the field), ``PREFIX_seed<s>_uniform_<k>.tif`` (the reference) and
 ``PREFIX_seed<s>_truth.h5`` (``rimcl_schema = "piv_sequence_truth"``, ``schema_version =
 2``), every dataset with named dimensions and ``units`` for ``xarray.open_dataset``:
 ``times (frame)`` (field time units), ``truth/dx``, ``truth/dy`` (``(step, row, column)``,
@@ -23,7 +29,8 @@ Files (:func:`write_piv_sequence`): per seed ``PREFIX_seed<s>_<k>.tif`` (``k`` f
 ``particles/position`` (``(id, frame, axis)``, field length units), ``particles/col``,
 ``particles/row`` (``(id, frame)``, pixels), ``particles/intensity`` (sheet intensity),
 ``particles/image_point`` (mean image point of the collected rays, ``(id, frame,
-image_axis)``, ``x2, x3``), ``particles/rays_collected``; root attributes ``units``,
+image_axis)``, ``x2, x3``), ``particles/rays_collected``, and the reference's
+``particles/image_point_uniform``, ``particles/rays_collected_uniform``; root attributes ``units``,
 ``config``, ``versions``.
 """
 
@@ -69,6 +76,8 @@ class PivSequence:
         Tracer positions (field length units).
     frames : rimcl.piv.frame_pair.PivFrames
         The F frames through the field.
+    uniform : rimcl.piv.frame_pair.PivFrames
+        The same F exposures through a uniform medium, the same noise draws.
     truth_px : ndarray, float64, shape (F - 1, rows, columns, 2)
         Dense truth ``(dx, dy)`` per pixel, pixels per frame.
     truth_ms : ndarray or None
@@ -84,6 +93,7 @@ class PivSequence:
     times: np.ndarray
     positions: np.ndarray
     frames: PivFrames
+    uniform: PivFrames
     truth_px: np.ndarray
     truth_ms: object
     pixels: np.ndarray
@@ -177,7 +187,7 @@ def run_piv_sequence(
     """
     from rimcl.core.device import describe_device, select_device
     from rimcl.core.memory import check_sequence_memory
-    from rimcl.ptv.field_source import case_of, open_source
+    from rimcl.ptv.field_source import case_of, open_source, reference_step, uniform_like
 
     piv = PivConfig() if piv is None else piv
     camera_config = PIV_CAMERA if camera is None else camera
@@ -215,6 +225,7 @@ def run_piv_sequence(
         if length_m is not None and time_s is not None:
             truth_ms = truth_px * (renderer.pixel_size * length_m / (float(piv.dt) * time_s))
         thickness = imaging.thickness(scene, cam)
+        uniform = uniform_like(source, getattr(cam, "fluid_index", 1.0))
         bar = _progress(progress, None, len(times))
         for seed in seeds:
             rng = np.random.default_rng(np.random.SeedSequence(seed))
@@ -223,19 +234,26 @@ def run_piv_sequence(
             if bar is not None:
                 bar.reset(total=len(times) * positions.shape[1])
             model = sensor.build(imaging.bit_depth, seed)
-            made = image_frames(
-                fields,
+            imaging_options = {
+                "rays_per_batch": run.rays_per_batch,
+                "engine": run.engine,
+                "sensor": model,
+                "mie": None if mie is None else mie.build(None if fluid is None else fluid.build()),
+                "noise": (MEASURED_PASS, 0),
+                "bar": bar,
+            }
+            made = image_frames(fields, positions, scene, cam, imaging, options, **imaging_options)
+            if bar is not None:
+                bar.reset(total=len(times) * positions.shape[1])
+            # the reference: the same exposures through the uniform medium, the same draws
+            reference = image_frames(
+                [uniform] * len(times),
                 positions,
                 scene,
                 cam,
                 imaging,
-                options,
-                run.rays_per_batch,
-                engine=run.engine,
-                sensor=model,
-                mie=None if mie is None else mie.build(None if fluid is None else fluid.build()),
-                noise=(MEASURED_PASS, 0),
-                bar=bar,
+                {**options, "step": reference_step(integrator.step, source)},
+                **imaging_options,
             )
             config = {
                 "field": source_name,
@@ -262,6 +280,7 @@ def run_piv_sequence(
                     times=times,
                     positions=positions,
                     frames=made,
+                    uniform=reference,
                     truth_px=truth_px,
                     truth_ms=truth_ms,
                     pixels=frame_pixels(renderer, shape, positions[..., 1:]),
@@ -275,16 +294,22 @@ def run_piv_sequence(
     return results
 
 
-def sequence_paths(prefix, seed, frames):
-    """The files of one realisation: ``frames`` TIFFs and the truth file."""
+def sequence_paths(prefix, seed, frames, medium=""):
+    """The files of one realisation: ``frames`` TIFFs (through the field, or with ``medium =
+    "uniform"`` the reference's) and the truth file."""
     prefix = Path(prefix)
-    tiffs = [prefix.with_name(f"{prefix.name}_seed{seed}_{k:03d}.tif") for k in range(frames)]
+    tag = f"{medium}_" if medium else ""
+    tiffs = [prefix.with_name(f"{prefix.name}_seed{seed}_{tag}{k:03d}.tif") for k in range(frames)]
     return tiffs, prefix.with_name(f"{prefix.name}_seed{seed}_truth.h5")
 
 
 #: The files ``rimcl piv sequence`` writes for a prefix (an earlier run's are replaced as a
 #: set, :class:`rimcl.core.outputs.OutputSet`).
-SEQUENCE_OWNED = ("{prefix}_seed*_[0-9][0-9][0-9]*.tif", "{prefix}_seed*_truth.h5")
+SEQUENCE_OWNED = (
+    "{prefix}_seed*_[0-9][0-9][0-9]*.tif",
+    "{prefix}_seed*_uniform_[0-9][0-9][0-9]*.tif",
+    "{prefix}_seed*_truth.h5",
+)
 
 
 def open_sequence_outputs(prefix, overwrite=False, inputs=()):
@@ -299,8 +324,12 @@ def write_piv_sequence(outputs, sequence):
     ``outputs`` (:func:`open_sequence_outputs`); returns the final paths."""
     prefix = outputs.folder / outputs.prefix
     tiffs, truth = sequence_paths(prefix, sequence.seed, len(sequence.times))
+    uniform_tiffs, _ = sequence_paths(prefix, sequence.seed, len(sequence.times), "uniform")
     for path, image in zip(tiffs, sequence.frames.images, strict=True):
         write_tiff(outputs.path(path.name), image, sequence.config)
+    reference_config = {**sequence.config, "medium": "uniform (the reference sequence)"}
+    for path, image in zip(uniform_tiffs, sequence.uniform.images, strict=True):
+        write_tiff(outputs.path(path.name), image, reference_config)
     final = truth
     truth = outputs.path(truth.name)
     with atomic_path(truth) as tmp, h5py.File(tmp, "w") as h5:
@@ -342,9 +371,11 @@ def write_piv_sequence(outputs, sequence):
             "intensity": (sequence.intensity, None, "1"),
             "image_point": (sequence.frames.optics, "image_axis", "L0"),
             "rays_collected": (sequence.frames.collected, None, "1"),
+            "image_point_uniform": (sequence.uniform.optics, "image_axis", "L0"),
+            "rays_collected_uniform": (sequence.uniform.collected, None, "1"),
         }
         for name, (values, last, units) in columns.items():
             dimensions = (*TRACER_DIMENSIONS, last) if last else TRACER_DIMENSIONS
             write_variable(particles, name, np.swapaxes(values, 0, 1), dimensions, units)
         stamp_h5(h5, sequence.config, sequence.device)
-    return [*tiffs, final]
+    return [*tiffs, *uniform_tiffs, final]
