@@ -234,6 +234,38 @@ RIMCL_INLINE lreal step_error(ray_state fine, ray_state coarse, real depth_per_n
 }
 #endif
 
+/* The exit index: rescale T of the lanes in `done` so that |T| = n sampled at their exit
+ * point, leaving the direction T/|T| as it is. The integrated |T| drifts from the sampled
+ * n (the interpolated grad n is not the gradient of the interpolated n, and the steps
+ * have errors); the exit record's |T| is the index that Snell at the exit face takes
+ * (rimcl.optics.trace.TraceResult.exit_index), so it is the field's n at the point where
+ * the ray leaves, to the working precision (field samples are float32 in every mode).
+ * The NumPy twin (rimcl/optics/reference.py) does the same. */
+RIMCL_INLINE void at_exit_index(FIELD_ARGS, ray_state *s, lmask done)
+{
+    if (!LANES_ANY(done))
+        return;
+    const lreal one = (real)1;
+    lsample se = {one, (lreal)((real)0), (lreal)((real)0), (lreal)((real)0)};
+    field_sample_lanes(FIELD_PASS, s->r, done, &se);
+#if RIMCL_PRECISION == RIMCL_F32C
+    /* |T| of the pair T = hi + lo: |hi| + hi.lo / |hi| */
+    lreal norm_hi = sqrt(s->t.x * s->t.x + s->t.y * s->t.y + s->t.z * s->t.z);
+    lreal norm = norm_hi + (s->t.x * s->t_lo.x + s->t.y * s->t_lo.y + s->t.z * s->t_lo.z) / norm_hi;
+    lreal factor = done ? se.n / norm : one;
+    lvec3 hi = s->t, lo = s->t_lo;
+    scale_pair(factor, hi.x, lo.x, &s->t.x, &s->t_lo.x);
+    scale_pair(factor, hi.y, lo.y, &s->t.y, &s->t_lo.y);
+    scale_pair(factor, hi.z, lo.z, &s->t.z, &s->t_lo.z);
+#else
+    lreal norm = sqrt(s->t.x * s->t.x + s->t.y * s->t.y + s->t.z * s->t.z);
+    lreal factor = done ? se.n / norm : one;
+    s->t.x *= factor;
+    s->t.y *= factor;
+    s->t.z *= factor;
+#endif
+}
+
 /* Everything a traced lane ends with. */
 typedef struct {
     ray_state s;     /* exit state (last state for failed rays) */
@@ -392,6 +424,7 @@ RIMCL_INLINE lane_result trace_lanes(FIELD_ARGS, lvec3 origin_hi, lvec3 origin_l
 #endif
     }
 
+    at_exit_index(FIELD_PASS, &s, valid & (status == (lint)RAY_OK));
     lane_result out = {s, sums, status, steps, rejected, evaluations};
     return out;
 }
