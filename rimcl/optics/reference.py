@@ -128,7 +128,7 @@ def _perpendicular(grad, t):
     return grad - np.sum(grad * unit, axis=1, keepdims=True) * unit
 
 
-def _at_exit_index(field, r, t, done, interp):
+def rescale_to_exit_index(field, r, t, done, interp):
     """Rescale ``t`` of the rows ``done`` (in place) so that ``|t|`` is ``n`` sampled at
     their exit points ``r``, the direction kept: the exit index, as ``at_exit_index`` in
     ``cl/rimcl_trace.h`` does."""
@@ -226,7 +226,7 @@ def trace_rays_reference(
         if active.size:
             n_a[active], g_a[active] = sample_field(field, r[active], interp)
 
-    _at_exit_index(field, r, t, status == 0, interp)
+    rescale_to_exit_index(field, r, t, status == 0, interp)
     raw = np.zeros((count, 17), dtype=np.float32)
     raw[:, 0:3], raw[:, 3:6] = split_pairs(r)
     raw[:, 6:9], raw[:, 9:12] = split_pairs(t)
