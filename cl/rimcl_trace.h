@@ -239,27 +239,42 @@ RIMCL_INLINE lreal step_error(ray_state fine, ray_state coarse, real depth_per_n
  * n (the interpolated grad n is not the gradient of the interpolated n, and the steps
  * have errors); the exit record's |T| is the index that Snell at the exit face takes
  * (rimcl.optics.trace.TraceResult.exit_index), so it is the field's n at the point where
- * the ray leaves, to the working precision (field samples are float32 in every mode).
- * The NumPy twin (rimcl/optics/reference.py) does the same. */
+ * the ray leaves. In f32c, n = n_ref (hi, lo) + delta_n and |T| are formed as float pairs
+ * and T moves by its relative change, so |T| = n to about 1e-11, not to the float
+ * rounding of n (6e-8 of it, comparable to the whole refraction at weak cases). The NumPy
+ * twin (rimcl/optics/reference.py) does the same in float64. */
 RIMCL_INLINE void at_exit_index(FIELD_ARGS, ray_state *s, lmask done)
 {
     if (!LANES_ANY(done))
         return;
-    const lreal one = (real)1;
-    lsample se = {one, (lreal)((real)0), (lreal)((real)0), (lreal)((real)0)};
-    field_sample_lanes(FIELD_PASS, s->r, done, &se);
+    const lreal zero = (real)0;
+    lsample se = {zero, zero, zero, zero};
 #if RIMCL_PRECISION == RIMCL_F32C
-    /* |T| of the pair T = hi + lo: |hi| + hi.lo / |hi| */
-    lreal norm_hi = sqrt(s->t.x * s->t.x + s->t.y * s->t.y + s->t.z * s->t.z);
-    lreal norm = norm_hi + (s->t.x * s->t_lo.x + s->t.y * s->t_lo.y + s->t.z * s->t_lo.z) / norm_hi;
-    lreal factor = done ? se.n / norm : one;
-    lvec3 hi = s->t, lo = s->t_lo;
-    scale_pair(factor, hi.x, lo.x, &s->t.x, &s->t_lo.x);
-    scale_pair(factor, hi.y, lo.y, &s->t.y, &s->t_lo.y);
-    scale_pair(factor, hi.z, lo.z, &s->t.z, &s->t_lo.z);
+    field_sample_lanes_base(FIELD_PASS, s->r, done, &se, (real)0); /* delta_n alone */
+    lreal n_lo;
+    const lreal n_hi = two_sum((lreal)params[P_NREF], se.n, &n_lo);
+    n_lo += params[P_NREF + 1];
+    /* |T|^2 as a pair (exact squares of the hi parts), then its square root */
+    lreal q_hi = zero, q_lo = zero, err;
+    lreal sq = two_prod(s->t.x, s->t.x, &err);
+    df_add(&q_hi, &q_lo, sq, err + (real)2 * s->t.x * s->t_lo.x);
+    sq = two_prod(s->t.y, s->t.y, &err);
+    df_add(&q_hi, &q_lo, sq, err + (real)2 * s->t.y * s->t_lo.y);
+    sq = two_prod(s->t.z, s->t.z, &err);
+    df_add(&q_hi, &q_lo, sq, err + (real)2 * s->t.z * s->t_lo.z);
+    const lreal norm_hi = sqrt(q_hi);
+    sq = two_prod(norm_hi, norm_hi, &err);
+    const lreal norm_lo = (((q_hi - sq) - err) + q_lo) / ((real)2 * norm_hi);
+    /* T += eps T, eps = (n - |T|) / |T| (n and |T| within a factor 2: n_hi - norm_hi exact) */
+    lreal eps = ((n_hi - norm_hi) + (n_lo - norm_lo)) / norm_hi;
+    eps = done ? eps : zero;
+    df_add(&s->t.x, &s->t_lo.x, eps * s->t.x, eps * s->t_lo.x);
+    df_add(&s->t.y, &s->t_lo.y, eps * s->t.y, eps * s->t_lo.y);
+    df_add(&s->t.z, &s->t_lo.z, eps * s->t.z, eps * s->t_lo.z);
 #else
-    lreal norm = sqrt(s->t.x * s->t.x + s->t.y * s->t.y + s->t.z * s->t.z);
-    lreal factor = done ? se.n / norm : one;
+    field_sample_lanes(FIELD_PASS, s->r, done, &se);
+    lreal factor = se.n / sqrt(s->t.x * s->t.x + s->t.y * s->t.y + s->t.z * s->t.z);
+    factor = done ? factor : (lreal)((real)1);
     s->t.x *= factor;
     s->t.y *= factor;
     s->t.z *= factor;
