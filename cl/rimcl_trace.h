@@ -4,7 +4,9 @@
  * Purpose: the Sharma-Kumar-Ghatak Runge-Kutta-Nystrom integration of trace.cl as a
  * function, trace_lanes(), shared by every kernel that traces rays (trace.cl: rays given
  * by the host; fan.cl: a camera's rays made on the device), and store_lane_record(),
- * the one writer of the per-ray exit record. The method, the step control and the
+ * the one writer of the per-ray exit record. trace_lanes() ends every ray that reaches
+ * the exit plane with |T| = n sampled at its exit point (at_exit_index: the exit index
+ * Snell takes at the wall, for every camera). The method, the step control and the
  * record layout are described in trace.cl.
  * Required defines: as trace.cl (RIMCL_PRECISION, RIMCL_FIELD, RIMCL_INTERP,
  *   RIMCL_PERIODIC; optional RIMCL_LANES, RIMCL_POCL_FAST, RIMCL_ADAPTIVE).
