@@ -268,11 +268,14 @@ RIMCL_INLINE void at_exit_index(FIELD_ARGS, ray_state *s, lmask done)
     sq = two_prod(norm_hi, norm_hi, &err);
     const lreal norm_lo = (((q_hi - sq) - err) + q_lo) / ((real)2 * norm_hi);
     /* T += eps T, eps = (n - |T|) / |T| (n and |T| within a factor 2: n_hi - norm_hi exact) */
-    lreal eps = ((n_hi - norm_hi) + (n_lo - norm_lo)) / norm_hi;
-    eps = done ? eps : zero;
-    df_add(&s->t.x, &s->t_lo.x, eps * s->t.x, eps * s->t_lo.x);
-    df_add(&s->t.y, &s->t_lo.y, eps * s->t.y, eps * s->t_lo.y);
-    df_add(&s->t.z, &s->t_lo.z, eps * s->t.z, eps * s->t_lo.z);
+    const lreal eps = ((n_hi - norm_hi) + (n_lo - norm_lo)) / norm_hi;
+    lvec3 hi = s->t, lo = s->t_lo;
+    df_add(&hi.x, &lo.x, eps * s->t.x, eps * s->t_lo.x);
+    df_add(&hi.y, &lo.y, eps * s->t.y, eps * s->t_lo.y);
+    df_add(&hi.z, &lo.z, eps * s->t.z, eps * s->t_lo.z);
+    /* the other lanes keep their state bit for bit */
+    s->t = lvec3_select(done, s->t, hi);
+    s->t_lo = lvec3_select(done, s->t_lo, lo);
 #else
     field_sample_lanes(FIELD_PASS, s->r, done, &se);
     lreal factor = se.n / sqrt(s->t.x * s->t.x + s->t.y * s->t.y + s->t.z * s->t.z);
