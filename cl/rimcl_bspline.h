@@ -1,7 +1,7 @@
 /*
  * rimcl_bspline.h -- cubic B-spline interpolation of delta_n with its analytic gradient.
  *
- * Purpose: field_sample(p) for RIMCL_INTERP == RIMCL_INTERP_BSPLINE3 (included by
+ * Purpose: field_sample_base(p, n_base) for RIMCL_INTERP == RIMCL_INTERP_BSPLINE3 (included by
  * rimcl_field.h, not on its own). n and grad n come from the same C2 spline, so they
  * are consistent; 4 x 4 x 4 = 64 coefficients per sample.
  * The coefficients are prefiltered on the host (rimcl/fields/bspline.py) so that the spline
@@ -63,7 +63,7 @@ RIMCL_INLINE void bspline_axis(real u, int n, int *taps, real *w, real *dw)
 #endif
 }
 
-RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
+RIMCL_INLINE real4 field_sample_base(FIELD_ARGS, real3 p, const real n_base)
 {
     real3 u = grid_coordinates(params, p);
     int t1[4], t2[4], t3[4];
@@ -102,7 +102,7 @@ RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
     real g2 = dot(sum2, x1_weights);
     real g3 = dot(sum3, x1_weights);
     real3 grad = (real3)(g1, g2, g3) * PARAM3(params, P_INVH_HI, P_INVH_LO);
-    return (real4)(value + PARAM(params, P_NREF), grad.x, grad.y, grad.z);
+    return (real4)(value + n_base, grad.x, grad.y, grad.z);
 }
 
 #endif

@@ -3,10 +3,12 @@
  *
  * Purpose: field_sample_lanes(p, active, out) -> n, dn/dx1, dn/dx2, dn/dx3 at the
  * positions p (x1, x2, x3) of the active lanes of a work-item (rimcl_real.h), in the
- * working precision `real`. Trilinear sampling finds cells and weights for all lanes in
+ * working precision `real`; field_sample_lanes_base(p, active, out, n_base) the same with
+ * n - n_ref + n_base in place of n (n_base 0: delta_n itself, without the rounding of
+ * n_ref + delta_n in float). Trilinear sampling finds cells and weights for all lanes in
  * vector registers and blends lane by lane, or with 16 float lanes on PoCL all lanes at
  * once after a transpose in registers (the same bits); the other kinds call the one-point
- * field_sample(p) per lane. With RIMCL_POCL_FAST, field_prefetch_lanes (trilinear)
+ * field_sample_base(p, n_base) per lane. With RIMCL_POCL_FAST, field_prefetch_lanes (trilinear)
  * fetches the cells a step ahead into the cache (RIMCL_FIELD_PREFETCH is then 1).
  * Required defines:
  *   RIMCL_FIELD    RIMCL_FIELD_GRID (0): gridded, interpolated as RIMCL_INTERP says,
@@ -174,12 +176,12 @@ RIMCL_INLINE void lanes_nodes(__global const float4 *grid, lint idx, lreal *v)
  * lanes it was 10 % slower than lane by lane.
  * Inactive lanes load from a cell inside the grid too (lanes_cell_of) and keep their
  * values in *out (finished rays are frozen). */
-RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample *out)
+RIMCL_INLINE void field_sample_lanes_base(FIELD_ARGS, lvec3 p, lmask active, lsample *out,
+                                          const real n_base)
 {
     lreal w1, w2, w3;
     lint up1, up2, up3;
     const lint base = lanes_cell(FIELD_PASS, p, &w1, &w2, &w3, &up1, &up2, &up3);
-    const real n_ref = PARAM(params, P_NREF);
     lreal c000[4], c100[4], c010[4], c110[4], c001[4], c101[4], c011[4], c111[4];
     lanes_nodes(grid, base, c000);
     lanes_nodes(grid, base + up1, c100);
@@ -199,7 +201,7 @@ RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample 
         const lreal c0 = c00 + w2 * (c01 - c00);
         s[m] = c0 + w3 * (c10 + w2 * (c11 - c10) - c0);
     }
-    out->n = active ? n_ref + s[0] : out->n;
+    out->n = active ? n_base + s[0] : out->n;
     out->g1 = active ? s[1] : out->g1;
     out->g2 = active ? s[2] : out->g2;
     out->g3 = active ? s[3] : out->g3;
@@ -208,12 +210,12 @@ RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample 
 /* Trilinear interpolation of the float4 nodes: the cells and weights of all lanes are
  * found at once in vector registers, the 8 corner loads and the blend lane by lane.
  * Lanes not in `active` keep their values in *out (finished rays are frozen). */
-RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample *out)
+RIMCL_INLINE void field_sample_lanes_base(FIELD_ARGS, lvec3 p, lmask active, lsample *out,
+                                          const real n_base)
 {
     lreal w1, w2, w3;
     lint up1, up2, up3;
     lint base = lanes_cell(FIELD_PASS, p, &w1, &w2, &w3, &up1, &up2, &up3);
-    const real n_ref = PARAM(params, P_NREF);
 #pragma unroll
     for (int k = 0; k < RIMCL_LANES; ++k) {
         if (LANE_I(active, k)) {
@@ -226,7 +228,7 @@ RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample 
             real4 c11 = lerp4(c[d3 + d2], c[d3 + d2 + d1], f1);
             real4 c0 = c00 + f2 * (c01 - c00);
             real4 s = c0 + f3 * (c10 + f2 * (c11 - c10) - c0);
-            LANE(out->n, k) = n_ref + s.x;
+            LANE(out->n, k) = n_base + s.x;
             LANE(out->g1, k) = s.y;
             LANE(out->g2, k) = s.z;
             LANE(out->g3, k) = s.w;
@@ -273,7 +275,7 @@ __constant sampler_t field_sampler =
     CLK_NORMALIZED_COORDS_FALSE | CLK_ADDRESS_CLAMP_TO_EDGE | CLK_FILTER_LINEAR;
 #endif
 
-RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
+RIMCL_INLINE real4 field_sample_base(FIELD_ARGS, real3 p, const real n_base)
 {
     (void)counts;
     real3 u = grid_coordinates(params, p);
@@ -283,7 +285,7 @@ RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
     at.w = 0.0f;
 #endif
     real4 s = convert_real4(read_imagef(grid, field_sampler, at));
-    s.x += PARAM(params, P_NREF);
+    s.x += n_base;
     return s;
 }
 
@@ -297,7 +299,8 @@ RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
 
 #else /* closed-form fields */
 
-RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
+/* Closed forms give n itself: n_base other than n_ref shifts it by n_base - n_ref. */
+RIMCL_INLINE real4 field_sample_closed(FIELD_ARGS, real3 p)
 {
     (void)grid;
     (void)counts;
@@ -323,6 +326,14 @@ RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
 #endif
 }
 
+
+RIMCL_INLINE real4 field_sample_base(FIELD_ARGS, real3 p, const real n_base)
+{
+    real4 s = field_sample_closed(FIELD_PASS, p);
+    s.x += n_base - PARAM(params, P_NREF);
+    return s;
+}
+
 #endif /* RIMCL_FIELD */
 
 #ifndef RIMCL_LANE_SAMPLER
@@ -330,12 +341,14 @@ RIMCL_INLINE real4 field_sample(FIELD_ARGS, real3 p)
  * other lanes of *out keep their values (finished rays are frozen). The loop is not
  * unrolled: a sample is long (64 taps for bspline3), and 8 copies of it build slowly
  * (13 s against 3 s on PoCL) for no gain in speed. */
-RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample *out)
+RIMCL_INLINE void field_sample_lanes_base(FIELD_ARGS, lvec3 p, lmask active, lsample *out,
+                                          const real n_base)
 {
 #pragma unroll 1
     for (int k = 0; k < RIMCL_LANES; ++k) {
         if (LANE_I(active, k)) {
-            real4 s = field_sample(FIELD_PASS, (real3)(LANE(p.x, k), LANE(p.y, k), LANE(p.z, k)));
+            real4 s = field_sample_base(FIELD_PASS, (real3)(LANE(p.x, k), LANE(p.y, k), LANE(p.z, k)),
+                                        n_base);
             LANE(out->n, k) = s.x;
             LANE(out->g1, k) = s.y;
             LANE(out->g2, k) = s.z;
@@ -344,6 +357,12 @@ RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample 
     }
 }
 #endif
+
+/* n, dn/dx1, dn/dx2, dn/dx3 at the positions of the lanes in `active`. */
+RIMCL_INLINE void field_sample_lanes(FIELD_ARGS, lvec3 p, lmask active, lsample *out)
+{
+    field_sample_lanes_base(FIELD_PASS, p, active, out, PARAM(params, P_NREF));
+}
 
 #ifndef RIMCL_FIELD_PREFETCH
 #define RIMCL_FIELD_PREFETCH 0

@@ -4,7 +4,9 @@
  * Purpose: the Sharma-Kumar-Ghatak Runge-Kutta-Nystrom integration of trace.cl as a
  * function, trace_lanes(), shared by every kernel that traces rays (trace.cl: rays given
  * by the host; fan.cl: a camera's rays made on the device), and store_lane_record(),
- * the one writer of the per-ray exit record. The method, the step control and the
+ * the one writer of the per-ray exit record. trace_lanes() ends every ray that reaches
+ * the exit plane with |T| = n sampled at its exit point (at_exit_index: the exit index
+ * Snell takes at the wall, for every camera). The method, the step control and the
  * record layout are described in trace.cl.
  * Required defines: as trace.cl (RIMCL_PRECISION, RIMCL_FIELD, RIMCL_INTERP,
  *   RIMCL_PERIODIC; optional RIMCL_LANES, RIMCL_POCL_FAST, RIMCL_ADAPTIVE).
@@ -234,6 +236,56 @@ RIMCL_INLINE lreal step_error(ray_state fine, ray_state coarse, real depth_per_n
 }
 #endif
 
+/* The exit index: rescale T of the lanes in `done` so that |T| = n sampled at their exit
+ * point, leaving the direction T/|T| as it is. The integrated |T| drifts from the sampled
+ * n (the interpolated grad n is not the gradient of the interpolated n, and the steps
+ * have errors); the exit record's |T| is the index that Snell at the exit face takes
+ * (rimcl.optics.trace.TraceResult.exit_index), so it is the field's n at the point where
+ * the ray leaves. In f32c, n = n_ref (hi, lo) + delta_n and |T| are formed as float pairs
+ * and T moves by its relative change, so |T| = n to about 1e-11, not to the float
+ * rounding of n (6e-8 of it, comparable to the whole refraction at weak cases). The NumPy
+ * twin (rimcl/optics/reference.py) does the same in float64. */
+RIMCL_INLINE void at_exit_index(FIELD_ARGS, ray_state *s, lmask done)
+{
+    if (!LANES_ANY(done))
+        return;
+    const lreal zero = (real)0;
+    lsample se = {zero, zero, zero, zero};
+#if RIMCL_PRECISION == RIMCL_F32C
+    field_sample_lanes_base(FIELD_PASS, s->r, done, &se, (real)0); /* delta_n alone */
+    lreal n_lo;
+    const lreal n_hi = two_sum((lreal)params[P_NREF], se.n, &n_lo);
+    n_lo += params[P_NREF + 1];
+    /* |T|^2 as a pair (exact squares of the hi parts), then its square root */
+    lreal q_hi = zero, q_lo = zero, err;
+    lreal sq = two_prod(s->t.x, s->t.x, &err);
+    df_add(&q_hi, &q_lo, sq, err + (real)2 * s->t.x * s->t_lo.x);
+    sq = two_prod(s->t.y, s->t.y, &err);
+    df_add(&q_hi, &q_lo, sq, err + (real)2 * s->t.y * s->t_lo.y);
+    sq = two_prod(s->t.z, s->t.z, &err);
+    df_add(&q_hi, &q_lo, sq, err + (real)2 * s->t.z * s->t_lo.z);
+    const lreal norm_hi = sqrt(q_hi);
+    sq = two_prod(norm_hi, norm_hi, &err);
+    const lreal norm_lo = (((q_hi - sq) - err) + q_lo) / ((real)2 * norm_hi);
+    /* T += eps T, eps = (n - |T|) / |T| (n and |T| within a factor 2: n_hi - norm_hi exact) */
+    const lreal eps = ((n_hi - norm_hi) + (n_lo - norm_lo)) / norm_hi;
+    lvec3 hi = s->t, lo = s->t_lo;
+    df_add(&hi.x, &lo.x, eps * s->t.x, eps * s->t_lo.x);
+    df_add(&hi.y, &lo.y, eps * s->t.y, eps * s->t_lo.y);
+    df_add(&hi.z, &lo.z, eps * s->t.z, eps * s->t_lo.z);
+    /* the other lanes keep their state bit for bit */
+    s->t = lvec3_select(done, s->t, hi);
+    s->t_lo = lvec3_select(done, s->t_lo, lo);
+#else
+    field_sample_lanes(FIELD_PASS, s->r, done, &se);
+    lreal factor = se.n / sqrt(s->t.x * s->t.x + s->t.y * s->t.y + s->t.z * s->t.z);
+    factor = done ? factor : (lreal)((real)1);
+    s->t.x *= factor;
+    s->t.y *= factor;
+    s->t.z *= factor;
+#endif
+}
+
 /* Everything a traced lane ends with. */
 typedef struct {
     ray_state s;     /* exit state (last state for failed rays) */
@@ -392,6 +444,7 @@ RIMCL_INLINE lane_result trace_lanes(FIELD_ARGS, lvec3 origin_hi, lvec3 origin_l
 #endif
     }
 
+    at_exit_index(FIELD_PASS, &s, valid & (status == (lint)RAY_OK));
     lane_result out = {s, sums, status, steps, rejected, evaluations};
     return out;
 }

@@ -6,8 +6,10 @@
  *   A = h D(R),  B = h D(R + h T/2 + h A/8),  C = h D(R + h T + h B/2)
  *   R += h (T + (A + 2B)/6),  T += (A + 4B + C)/6
  * The last step is shortened by Newton iteration on its length so that the ray ends
- * on the plane x1 = x_end (crossed in either direction). Straight back-projection and
- * angles are done on the host in float64 from the exit state written here.
+ * on the plane x1 = x_end (crossed in either direction). A ray that ends there has its T
+ * rescaled so that |T| = n sampled at the exit point (the exit index; its direction is
+ * kept). Straight back-projection and angles are done on the host in float64 from the
+ * exit state written here.
  *
  * Step control (RIMCL_ADAPTIVE): 0, every step is h = P_STEP; 1, step doubling: each
  * attempt takes one step of h and two of h/2; their difference estimates the error of
@@ -29,7 +31,8 @@
  *
  * rays_in  (n_rays x RAY_IN_STRIDE floats): origin hi[3], origin lo[3],
  *          unit direction hi[3], direction lo[3] (float64 values split in pairs).
- * rays_out (n_rays x RAY_OUT_STRIDE floats): R hi[3], R lo[3], T hi[3], T lo[3],
+ * rays_out (n_rays x RAY_OUT_STRIDE floats): R hi[3], R lo[3], T hi[3], T lo[3] (|T| = n at
+ *          the exit point for rays that end on the plane),
  *          S = integral of ds, optical path = integral of n ds,
  *          integral of (grad n / n) perpendicular to the ray, ds [3].
  * ray_info (n_rays int4): steps taken (accepted steps if adaptive), status (RAY_* of

@@ -3,7 +3,7 @@ measured by benchmarks/speed.py, never here)."""
 
 import numpy as np
 import pytest
-from tracing_fields import oblique_rays, smooth_field
+from tracing_fields import independent_module, oblique_rays, smooth_field
 
 import rimcl
 
@@ -32,24 +32,6 @@ def test_default_trace_agrees_with_the_numba_baseline(device, periodic):
     np.testing.assert_allclose(kernel.end_dir[ok], baseline.end_dir[ok], rtol=0, atol=1e-7)
 
 
-def _independent_module():
-    """benchmarks/numba_independent.py: the benchmark's check of the baseline's speed."""
-    import importlib.util
-    import sys
-    from pathlib import Path
-
-    if "numba_independent" in sys.modules:
-        return sys.modules["numba_independent"]
-
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "numba_independent.py"
-    spec = importlib.util.spec_from_file_location("numba_independent", path)
-    module = importlib.util.module_from_spec(spec)
-    # registered before it runs: numba's disk cache finds its functions' module by name
-    sys.modules["numba_independent"] = module
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.mark.parametrize("periodic", [False, True])
 def test_both_numba_baselines_trace_the_float64_reference(periodic):
     """The package's numba baseline and the benchmark's independent numba code (which
@@ -58,7 +40,7 @@ def test_both_numba_baselines_trace_the_float64_reference(periodic):
     from rimcl.optics.reference import trace_rays_reference
     from rimcl.optics.trace import default_step, join_pairs, split_pairs
 
-    independent = _independent_module()
+    independent = independent_module()
     field = smooth_field(3e-2, counts=(16, 14, 12), periodic=periodic, seed=21)
     length = 2 * np.pi if periodic else 1.0
     origins, directions = oblique_rays(24, 0.2 * length, 0.8 * length, 0.3, seed=22)

@@ -71,3 +71,22 @@ def oblique_rays(count, lo, hi, spread, seed=0):
     slopes = np.tan(rng.uniform(-spread, spread, (count, 2)))
     directions = np.column_stack([np.ones(count), slopes])
     return origins, directions / np.linalg.norm(directions, axis=1, keepdims=True)
+
+
+def independent_module():
+    """benchmarks/numba_independent.py: float64 tracing code written apart from the package
+    (the speed benchmark's check of its baseline; the exit index's independent check)."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    if "numba_independent" in sys.modules:
+        return sys.modules["numba_independent"]
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "numba_independent.py"
+    spec = importlib.util.spec_from_file_location("numba_independent", path)
+    module = importlib.util.module_from_spec(spec)
+    # registered before it runs: numba's disk cache finds its functions' module by name
+    sys.modules["numba_independent"] = module
+    spec.loader.exec_module(module)
+    return module

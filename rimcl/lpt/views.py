@@ -26,7 +26,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.fields.field import Field
-from rimcl.optics.reference import sample_field, trace_rays_reference
+from rimcl.optics.reference import trace_rays_reference
 from rimcl.optics.straight import straight_rays
 
 
@@ -122,13 +122,11 @@ CHIEF_ITERATIONS = 6
 CHIEF_TOLERANCE = 1e-10
 
 
-def _exit_index(field, result, camera, interp):
-    """Fluid index at each ok ray's exit point (the window's inner face)."""
-    if getattr(field, "is_uniform", False):
-        return field.n_ref
-    index = np.full(len(result.ok), camera.fluid_index)
-    index[result.ok] = sample_field(field, result.end_pos[result.ok], interp)[0]
-    return index
+def _exit_index(result, camera):
+    """Fluid index at each ray's exit point (the window's inner face): the trace's
+    ``exit_index`` (``n`` sampled there, as for every camera; the calibration fluid's for
+    rays that failed, whose images are dropped)."""
+    return np.where(result.ok, result.exit_index, camera.fluid_index)
 
 
 def chief_targets(field, camera, points, tracer):
@@ -148,9 +146,7 @@ def chief_targets(field, camera, points, tracer):
     for _ in range(CHIEF_ITERATIONS):
         directions = camera.aim(points, targets[:, None]).reshape(-1, 3)
         result = tracer(field, points, directions, camera.x_end)
-        offset = camera.pupil_miss(
-            result.end_pos, result.end_dir, _exit_index(field, result, camera, tracer.interp)
-        )
+        offset = camera.pupil_miss(result.end_pos, result.end_dir, _exit_index(result, camera))
         offset[~result.ok] = np.nan
         miss = np.linalg.norm(offset, axis=1)
         if not np.any(miss > CHIEF_TOLERANCE):
@@ -186,7 +182,7 @@ def view(field, camera, points, rays, tracer, chief=None):
     origins = np.repeat(points, len(pupil), axis=0)
     result = tracer(field, origins, directions, camera.x_end)
     ok = result.ok
-    exit_index = _exit_index(field, result, camera, tracer.interp)
+    exit_index = _exit_index(result, camera)
     images = camera.image_of_rays(result.end_pos, result.end_dir, exit_index)
     images[~ok] = np.nan
     images = images.reshape(len(points), len(pupil), 2)

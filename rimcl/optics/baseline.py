@@ -17,6 +17,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.fields.field import Field
+from rimcl.optics.reference import rescale_to_exit_index
 from rimcl.optics.trace import (
     _default_max_steps,
     _finish,
@@ -232,7 +233,9 @@ def trace_rays_numba(
         step,
         int(max_steps),
     )
-    # the exit state as the kernel writes it: float64 values in float32 (hi, lo) pairs
+    # |T| = n at the exit point, as the kernel ends its rays; then the exit state as the
+    # kernel writes it: float64 values in float32 (hi, lo) pairs
+    rescale_to_exit_index(field, end[:, :3], end[:, 3:], info[:, 1] == 0, "trilinear")
     raw = np.zeros((len(origins), 17), dtype=np.float32)
     raw[:, 0:3], raw[:, 3:6] = split_pairs(end[:, :3])
     raw[:, 6:9], raw[:, 9:12] = split_pairs(end[:, 3:])

@@ -128,6 +128,15 @@ def _perpendicular(grad, t):
     return grad - np.sum(grad * unit, axis=1, keepdims=True) * unit
 
 
+def rescale_to_exit_index(field, r, t, done, interp):
+    """Rescale ``t`` of the rows ``done`` (in place) so that ``|t|`` is ``n`` sampled at
+    their exit points ``r``, the direction kept: the exit index, as ``at_exit_index`` in
+    ``cl/rimcl_trace.h`` does."""
+    if np.any(done):
+        n_exit, _ = sample_field(field, r[done], interp)
+        t[done] *= (n_exit / np.linalg.norm(t[done], axis=1))[:, None]
+
+
 def trace_rays_reference(
     field, origins, directions, *, x_end, step=None, max_steps=None, interp="trilinear"
 ):
@@ -217,6 +226,7 @@ def trace_rays_reference(
         if active.size:
             n_a[active], g_a[active] = sample_field(field, r[active], interp)
 
+    rescale_to_exit_index(field, r, t, status == 0, interp)
     raw = np.zeros((count, 17), dtype=np.float32)
     raw[:, 0:3], raw[:, 3:6] = split_pairs(r)
     raw[:, 6:9], raw[:, 9:12] = split_pairs(t)

@@ -129,8 +129,10 @@ class TraceResult:
     n_metric : ndarray, shape (N, 3)
         The paper's ``N = (1/S) ∫ (∇n/n)_⊥ ds`` (1/length); ``|Δθ| ≈ |N| S``.
     exit_index : ndarray, shape (N,)
-        The refractive index at the exit point, ``|T|`` of the exit state (``T = n dR/ds``),
-        what Snell at a wall on the exit plane takes.
+        The refractive index at the exit point, ``|T|`` of the exit state (``T = n dR/ds``):
+        every engine rescales the exit ``T`` of a ray that ends on the plane so that
+        ``|T|`` is ``n`` sampled at its exit point (the integrated ``|T|`` drifts from it).
+        What Snell at a wall on the exit plane takes, for every camera.
     steps : ndarray of int, shape (N,)
         Integration steps taken (the shortened last step included).
     status : ndarray of int8, shape (N,)
@@ -741,7 +743,7 @@ def _finish(origins, directions, raw_out, info, step, config):
     end_t = join_pairs(raw_out[:, 6:9], raw_out[:, 9:12])
     status = info[:, 1].astype(np.int8)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        exit_index = np.linalg.norm(end_t, axis=1)  # |T| = n at the exit point
+        exit_index = np.linalg.norm(end_t, axis=1)  # |T| = n sampled at the exit point
         end_dir = end_t / exit_index[:, None]
         distance = (end_pos[:, 0] - origins[:, 0]) / end_dir[:, 0]
         image_pos = end_pos - distance[:, None] * end_dir
