@@ -111,7 +111,7 @@ def test_killed_study_process_leaves_whole_files_and_resumes(device, tmp_path):
     out = tmp_path / "killed"
     cases = "C0,C1,C2,C3,C4"
     args = ["study", "--out", str(out), "--cases", cases, "--device", device.name]
-    args += ["--tracers", "30", "--fan", "8", "--no-progress", "--no-figures"]
+    args += QUICK  # the configuration of the test above: its kernels are built already
     process = subprocess.Popen(
         [sys.executable, "-c", "from rimcl.cli.main import cli; cli()", *args],
         stdout=subprocess.DEVNULL,

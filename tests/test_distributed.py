@@ -260,7 +260,10 @@ def test_a_killed_worker_loses_nothing_and_a_rerun_redoes_only_missing_shards(
         )
     kept = shard_path(out, "C4", (0, 7)).stat().st_mtime_ns
     lines = []
-    again = run_study(scene, out, figures=False, scheduler="local:1", report=lines.append)
+    # the rerun on the same cluster (a fresh one costs its processes' start and kernels)
+    again = run_study(
+        scene, out, figures=False, scheduler=local.scheduler_address, report=lines.append
+    )
     assert again.skipped == ["C1"] and again.ran == ["C4"]
     assert "[2/2] C4: 3 shard files merged (2 measured now" in "\n".join(lines)
     assert shard_path(out, "C4", (0, 7)).stat().st_mtime_ns == kept
