@@ -318,14 +318,22 @@ def test_piv_sequence_overwrite_leaves_no_frame_of_the_earlier_run(tmp_path):
     prefix = tmp_path / "s"
     first = run("piv", "sequence", *small, "--frames", "3", "--seeds", "0,1", "-o", prefix)
     assert first.exit_code == 0, first.output
-    assert len(list(tmp_path.glob("s_*"))) == 8
+    # per seed: 3 frames, 3 frames through the uniform fluid, the truth file
+    assert len(list(tmp_path.glob("s_*"))) == 14
     line = one_error_line(run("piv", "sequence", *small, "--frames", "2", "-o", prefix))
     assert "s_seed0_000.tif exists (use --overwrite" in line
     args = ("--frames", "2", "--seeds", "1", "-o", prefix, "--overwrite")
     second = run("piv", "sequence", *small, *args)
     assert second.exit_code == 0, second.output
     left = sorted(p.name for p in tmp_path.iterdir())
-    assert left == [".s" + MANIFEST, "s_seed1_000.tif", "s_seed1_001.tif", "s_seed1_truth.h5"]
+    assert left == [
+        ".s" + MANIFEST,
+        "s_seed1_000.tif",
+        "s_seed1_001.tif",
+        "s_seed1_truth.h5",
+        "s_seed1_uniform_000.tif",
+        "s_seed1_uniform_001.tif",
+    ]
 
 
 @pytest.mark.parametrize("seeds", ["-1", "0,0", ","])
