@@ -180,14 +180,11 @@ def test_pivlab_mat_holds_calibrated_vectors_with_calu_and_calv(rotation, tmp_pa
     assert any("rimcl" in str(line[0]) for line in up["information"].ravel())
 
 
-def test_openpiv_reads_the_pairs_with_the_right_signs(rotation, device):
-    """The recipe of docs/reference/formats/piv.md: OpenPIV's standard pipeline on rimcl's
-    frames (skipped where OpenPIV, GPL, is not installed; rimcl never imports it)."""
-    pyprocess = pytest.importorskip("openpiv.pyprocess")
-    tools = pytest.importorskip("openpiv.tools")
+def _pair_moved_right_and_down(device):
+    """A uniform-medium pair whose tracers move 1 px along x2 and 2 px down (-x3)."""
     start = seed_particles(SCENE, IMAGING, np.random.default_rng(7))
     moved = np.column_stack([start[:, 0], start[:, 1:] + np.array([1.0, -2.0]) / 128])
-    made = image_frames(
+    return image_frames(
         (_medium(), _medium()),
         np.stack([start, moved]),
         SCENE,
@@ -195,6 +192,14 @@ def test_openpiv_reads_the_pairs_with_the_right_signs(rotation, device):
         IMAGING,
         {"device": device},
     )
+
+
+def test_openpiv_reads_the_pairs_with_the_right_signs(rotation, device):
+    """The recipe of docs/reference/formats/piv.md: OpenPIV's standard pipeline on rimcl's
+    frames (skipped where OpenPIV, GPL, is not installed; rimcl never imports it)."""
+    pyprocess = pytest.importorskip("openpiv.pyprocess")
+    tools = pytest.importorskip("openpiv.tools")
+    made = _pair_moved_right_and_down(device)
     a, b = (image.astype(np.int32) for image in made.images)
     u, v, _ = pyprocess.extended_search_area_piv(a, b, 32, 16, search_area_size=32)
     x, y = pyprocess.get_coordinates(a.shape, 32, 16)
@@ -215,16 +220,7 @@ def test_openpiv_saves_the_file_rimcl_writes(device, tmp_path):
     pyprocess = pytest.importorskip("openpiv.pyprocess")
     tools = pytest.importorskip("openpiv.tools")
     scaling = pytest.importorskip("openpiv.scaling")
-    start = seed_particles(SCENE, IMAGING, np.random.default_rng(7))
-    moved = np.column_stack([start[:, 0], start[:, 1:] + np.array([1.0, -2.0]) / 128])
-    made = image_frames(
-        (_medium(), _medium()),
-        np.stack([start, moved]),
-        SCENE,
-        _camera(),
-        IMAGING,
-        {"device": device},
-    )
+    made = _pair_moved_right_and_down(device)
     pixel, dt = 1e-5, 1e-3
     a, b = (image.astype(np.int32) for image in made.images)
     u, v, _ = pyprocess.extended_search_area_piv(a, b, 32, 16, dt=dt, search_area_size=32)
