@@ -311,7 +311,7 @@ class FanStage:
         shape = default_kernel_shape(self.device)
         if measured is None and self.device.type & cl.device_type.CPU:
             shape = dataclasses.replace(shape, lanes=FAN_CPU_LANES)
-        if shape.group is None:
+        if measured is None or shape.group is None:  # the rule's group is trace_rays'
             shape = dataclasses.replace(shape, group=FAN_GROUP)
         return shape
 

@@ -85,7 +85,8 @@ class KernelShape:
 
 def rule_shape(device, precision="f32c", interp="trilinear"):
     """The shape without measurements: on CPUs 8 lanes, 16 on PoCL for a trilinear float
-    state, and the PoCL switch; one ray per work-item elsewhere (GPUs)."""
+    state, the PoCL switch and work-groups of :data:`CPU_TRACE_GROUP`; one ray per
+    work-item elsewhere (GPUs), in the driver's work-groups."""
     import pyopencl as cl
 
     from rimcl.core.device import is_pocl
@@ -93,7 +94,8 @@ def rule_shape(device, precision="f32c", interp="trilinear"):
     if device.type & cl.device_type.CPU:
         pocl = is_pocl(device)
         wide = pocl and _tuned_class(precision, interp)
-        return KernelShape(lanes=POCL_FLOAT_LANES if wide else CPU_LANES, pocl_fast=pocl)
+        lanes = POCL_FLOAT_LANES if wide else CPU_LANES
+        return KernelShape(lanes=lanes, pocl_fast=pocl, group=CPU_TRACE_GROUP)
     return KernelShape(lanes=1, pocl_fast=False)
 
 
@@ -237,6 +239,16 @@ def add_to_entry(device, name, part, path=None):
     return True
 
 
+def launch_group(shape, device):
+    """The work-group size ``trace_rays`` launches ``shape`` with on ``device``: the shape's,
+    else the driver's choice (None) on GPUs and :data:`CPU_TRACE_GROUP` on CPUs."""
+    import pyopencl as cl
+
+    if shape.group is None and device.type & cl.device_type.CPU:
+        return CPU_TRACE_GROUP
+    return shape.group
+
+
 def shape_in_use(device):
     """The shape ``device`` traces with now, and where it comes from, without tuning.
 
@@ -262,8 +274,10 @@ def shape_in_use(device):
         }
     rates = [m.get("ray_steps_per_s") for m in entry.get("measurements", [])]
     rates = [rate for rate in rates if isinstance(rate, (int, float))]
+    measured = KernelShape(**entry["shape"])
     return {
-        **KernelShape(**entry["shape"]).describe(),
+        **measured.describe(),
+        "group": launch_group(measured, device),
         "source": "measured",
         "mode": mode,
         "measured": entry.get("measured"),
@@ -278,7 +292,7 @@ def describe_shape(shape):
     parts = [f"{shape['lanes']} lane{'s' if shape['lanes'] > 1 else ''}"]
     if shape["pocl_fast"]:
         parts.append("PoCL switch")
-    parts.append(f"group {shape['group']}" if shape["group"] else "group auto")  # CPUs: 16
+    parts.append(f"group {shape['group']}" if shape["group"] else "group auto")
     if shape.get("image_group"):
         parts.append(f"image group {shape['image_group']}")
     return ", ".join(parts)

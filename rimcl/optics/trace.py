@@ -28,7 +28,7 @@ import numpy as np
 
 from rimcl.core.errors import RimclError
 from rimcl.fields.field import AnalyticField, Field
-from rimcl.optics.shapes import CPU_TRACE_GROUP, KernelShape, default_kernel_shape
+from rimcl.optics.shapes import KernelShape, default_kernel_shape, launch_group
 
 logger = logging.getLogger(__name__)
 
@@ -651,9 +651,7 @@ def run_trace(
         kernel_shape=kernel_shape,
     )
     shape, max_steps = launch.shape, launch.max_steps
-    group = shape.group
-    if group is None and device.type & cl.device_type.CPU:
-        group = CPU_TRACE_GROUP  # one compiled kernel for every ray count (PoCL)
+    group = launch_group(shape, device)  # CPUs: one compiled kernel for every ray count
     context, queue = context_for(device), queue_for(device)
     kernel = get_kernel(build_program(context, "trace.cl", launch.defines), "trace_rays")
     field_buffer, counts, params = launch.field_buffer, launch.counts, launch.params
